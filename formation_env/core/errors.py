@@ -1,0 +1,41 @@
+"""Domain errors and warnings of the maths core.
+
+Every error subclasses a built-in (``ValueError``) so callers that catch the
+built-in keep working, and every message names the object, the property that
+failed, and the expected against the actual value.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "FormationError",
+    "StressMatrixError",
+    "FrameworkError",
+    "ControlDimension",
+    "UnstableParameterError",
+    "StabilityWarning",
+]
+
+
+class FormationError(ValueError):
+    """Base class of all formation-env input errors."""
+
+
+class StressMatrixError(FormationError):
+    """A stress matrix fails one of its defining properties (the message says which)."""
+
+
+class FrameworkError(FormationError):
+    """A framework (positions, edges, leaders) is invalid, e.g. leaders do not span R^d."""
+
+
+class ControlDimension(FormationError):
+    """Arrays have incompatible shapes (python-control's name for the same error)."""
+
+
+class UnstableParameterError(FormationError):
+    """A sampling period or gain lies outside the range in which the chosen law is stable."""
+
+
+class StabilityWarning(UserWarning):
+    """A legal but doubtful setting, e.g. a sampling period beyond the stability bound."""

@@ -1,0 +1,34 @@
+# Two entry points, each does all the set-up it needs on a fresh machine:
+#   make run   - create .venv, install, run the main job (paper reproduction + report)
+#   make test  - create .venv, install, run the test suite
+PYTHON ?= python3
+VENV := .venv
+BIN := $(VENV)/bin
+STAMP := $(VENV)/.installed
+
+.PHONY: run test setup lint bench clean
+
+$(STAMP): pyproject.toml
+	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	# torch pinned to the CPU build that lies on this machine's disk (unpinned pulls a multi-GB CUDA build)
+	$(BIN)/python -m pip install --quiet torch==2.13.0
+	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+setup: $(STAMP)
+
+run: $(STAMP)
+	$(BIN)/formation-env report --out out
+
+test: $(STAMP)
+	SDL_VIDEODRIVER=dummy $(BIN)/python -m pytest -q
+
+lint: $(STAMP)
+	$(BIN)/ruff check . && $(BIN)/ruff format --check . && $(BIN)/mypy
+
+bench: $(STAMP)
+	$(BIN)/formation-env bench
+
+clean:
+	rm -rf $(VENV) out .pytest_cache .hypothesis

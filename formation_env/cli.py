@@ -48,6 +48,14 @@ def cmd_report(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_bench(args: argparse.Namespace) -> int:
+    """Run the benchmark suite (benchmarks/) and write BENCHMARKS.md."""
+    from benchmarks.__main__ import main as bench_main
+
+    argv = ["--out", args.out] + (["--quick"] if args.quick else []) + (["--only", *args.only] if args.only else [])
+    return bench_main(argv)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="formation-env", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -60,6 +68,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quick", action="store_true", help="fewer evaluation episodes")
     p.set_defaults(func=cmd_report)
+    p = sub.add_parser("bench", help="run the benchmarks and write BENCHMARKS.md")
+    p.add_argument("--only", nargs="*", help="sections (core, design, env)")
+    p.add_argument("--quick", action="store_true")
+    p.add_argument("--out", default="BENCHMARKS.md")
+    p.set_defaults(func=cmd_bench)
     return parser
 
 

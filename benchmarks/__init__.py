@@ -1,0 +1,5 @@
+"""Benchmarks (never timed unit tests): ``python -m benchmarks`` or ``formation-env bench``.
+
+Each module exposes ``TITLE``, ``run(quick: bool) -> list[dict]`` and
+``markdown(rows) -> str``; the runner writes BENCHMARKS.md with machine and date.
+"""

@@ -1,0 +1,52 @@
+"""Run the benchmarks and write BENCHMARKS.md: ``python -m benchmarks [--only core design env] [--quick]``."""
+
+from __future__ import annotations
+
+import argparse
+import datetime as dt
+import importlib
+import sys
+from pathlib import Path
+
+from .timing import machine
+
+#: Benchmark modules in report order; a module whose optional dependencies are missing is reported as skipped.
+MODULES = {"core": "benchmarks.core_bench", "design": "benchmarks.design_bench", "env": "benchmarks.env_bench"}
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m benchmarks", description=__doc__)
+    p.add_argument("--only", nargs="*", choices=sorted(MODULES), help="run only these sections")
+    p.add_argument("--quick", action="store_true", help="fewer repeats")
+    p.add_argument("--out", default="BENCHMARKS.md", help="markdown file to write (default BENCHMARKS.md)")
+    args = p.parse_args(argv)
+    names = args.only or list(MODULES)
+    stamp = dt.datetime.now(dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")
+    parts = [
+        "# Benchmarks",
+        "",
+        f"Measured {stamp} on {machine()} by `python -m benchmarks"
+        + (f" --only {' '.join(names)}" if args.only else "")
+        + (" --quick" if args.quick else "")
+        + "`. Rerun it to check; medians over repeats, min-max beside them.",
+        "",
+    ]
+    for name in names:
+        try:
+            mod = importlib.import_module(MODULES[name])
+        except ImportError as exc:
+            parts += [f"## {name}", "", f"Skipped: {exc}", ""]
+            print(f"[{name}] skipped: {exc}", file=sys.stderr)
+            continue
+        print(f"[{name}] {mod.TITLE} ...", file=sys.stderr, flush=True)
+        rows = mod.run(quick=args.quick)
+        table = mod.markdown(rows)
+        print(table)
+        parts += [f"## {mod.TITLE}", "", (mod.__doc__ or "").strip(), "", table, ""]
+    Path(args.out).write_text("\n".join(parts))
+    print(f"wrote {args.out}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -7,6 +7,7 @@ frameworks with the constructive sparse stress (n = 100 also dense). The step is
 
 from __future__ import annotations
 
+import functools
 import time
 
 import numpy as np
@@ -23,6 +24,7 @@ def _system(n: int, sparse: bool) -> tuple[object, list[int], float]:
         fw = paper_example()
         return paper_omega(), list(fw.leaders), 0.0
     from formation_env.core.design import design_stress
+
     from formation_env.core.frameworks import trilateration
 
     fw = trilateration(n, 2, seed=0)
@@ -49,7 +51,8 @@ def run(quick: bool = False) -> list[dict]:
             mem = lw.initial_memory()
             lw.step(x, u_l, mem)  # warm the factorisation
             number = 2000 if n <= 100 else 50
-            med, lo, hi = summary(time_call(lambda lw=lw, mem=mem: lw.step(x, u_l, mem), number, 3 if quick else 7))
+            fn = functools.partial(lw.step, x, u_l, mem)
+            med, lo, hi = summary(time_call(fn, number, 3 if quick else 7))
             rows.append(
                 {
                     "n": n,

@@ -31,7 +31,8 @@ def cmd_reproduce(args: argparse.Namespace) -> int:
         print(f"  Theorem 1 bound: T < {s['theorem1_bound_T_max']} s")
         print(f"  followers reach {s['followers_final']} (paper: {s['paper_followers_final']})")
         print(
-            f"  error decay per step: predicted {s['predicted_decay_per_step']}, measured {s['measured_decay_per_step']}"
+            f"  error decay per step: predicted {s['predicted_decay_per_step']}, "
+            f"measured {s['measured_decay_per_step']}"
         )
         print(f"  {s['maneuver']}: followers at {s['followers_after_maneuver']} (targets {s['scaled_targets']})")
         print(f"  reproduced: {s['reproduced']}; figure: {fig}")

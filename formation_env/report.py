@@ -13,7 +13,7 @@ from typing import Any
 
 from .core import LinearDynamics, paper_example, paper_omega, stability_report
 
-__all__ = ["write_report", "stability_table"]
+__all__ = ["stability_table", "write_report"]
 
 
 def stability_table() -> list[dict[str, Any]]:

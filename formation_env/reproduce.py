@@ -29,7 +29,7 @@ from .core import (
 )
 from .core.frameworks import PAPER_OMEGA_PRINTED
 
-__all__ = ["reproduce_paper", "plot_reproduction", "X0", "T", "STEPS", "MANEUVER_SCALE"]
+__all__ = ["MANEUVER_SCALE", "STEPS", "X0", "T", "plot_reproduction", "reproduce_paper"]
 
 #: Initial positions of the paper's example, shape (5, 2), m.
 X0 = np.array([[1.0, 0.0], [0.0, 1.0], [0.0, -1.0], [-4.0, 3.0], [-3.0, -2.0]])
@@ -61,7 +61,14 @@ def reproduce_paper(printed: bool = True) -> dict[str, Any]:
     man = scale(MANEUVER_SCALE, start=0.0, stop=MANEUVER_SECONDS)
     path = man.leader_path(fw.positions[list(fw.leaders)], T)
     phase2 = simulate(
-        omega, fw.leaders, phase1.positions[-1], dt=T, steps=STEPS, law="stationary", leader_path=path, return_result=True
+        omega,
+        fw.leaders,
+        phase1.positions[-1],
+        dt=T,
+        steps=STEPS,
+        law="stationary",
+        leader_path=path,
+        return_result=True,
     )
     final1 = phase1.positions[-1][list(fw.followers)]
     final2 = phase2.positions[-1][list(fw.followers)]
@@ -106,7 +113,10 @@ def plot_reproduction(summary: dict[str, Any], path: str | Path) -> Path:
     p1 = summary["_arrays"]["phase1"]
     p2 = summary["_arrays"]["phase2"]
     fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
-    for ax, res, title in ((axes[0], p1, "phase 1: reach the formation"), (axes[1], p2, "phase 2: leaders scale by 0.5")):
+    for ax, res, title in (
+        (axes[0], p1, "phase 1: reach the formation"),
+        (axes[1], p2, "phase 2: leaders scale by 0.5"),
+    ):
         pos = res.positions
         last = pos[-1]
         for i, j in fw.edges:

@@ -114,7 +114,9 @@ class SharedPolicyVecEnv(VecEnv):
         for e in self._slot_envs(indices):
             setattr(e.unwrapped, attr_name, value)
 
-    def env_method(self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any) -> list[Any]:
+    def env_method(
+        self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
+    ) -> list[Any]:
         return [getattr(e.unwrapped, method_name)(*method_args, **method_kwargs) for e in self._slot_envs(indices)]
 
     def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:

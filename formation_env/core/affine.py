@@ -19,17 +19,17 @@ from .errors import ControlDimension, FormationError
 from .validation import as_array
 
 __all__ = [
-    "affine_targets",
-    "rotation",
-    "scaling",
-    "shear_matrix",
-    "Maneuver",
-    "hold",
-    "translate",
-    "rotate",
-    "scale",
-    "shear",
     "AffineImage",
+    "Maneuver",
+    "affine_targets",
+    "hold",
+    "rotate",
+    "rotation",
+    "scale",
+    "scaling",
+    "shear",
+    "shear_matrix",
+    "translate",
 ]
 
 Array = NDArray[np.float64]
@@ -158,7 +158,7 @@ def scale(
     factors: Sequence[float] | float, start: float = 0.0, stop: float = 1.0, d: int = 2, smooth: bool = True
 ) -> Maneuver:
     """Theta goes from I to diag(factors) over [start, stop] s (a scalar scales every axis)."""
-    f = np.full(d, float(factors)) if np.isscalar(factors) else as_array(factors, "factors", ndim=1)
+    f = np.full(d, float(factors)) if isinstance(factors, int | float) else as_array(factors, "factors", ndim=1)
     if np.any(f <= 0):
         raise FormationError(f"scale factors must be positive (a zero factor collapses the formation), got {f}")
     dd = f.size

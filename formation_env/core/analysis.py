@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -17,7 +18,7 @@ from .errors import FormationError, UnstableParameterError
 from .laws import DynamicLeaderLaw, FollowerLaw, StressFeedbackLaw, make_law
 from .stress import Partition
 
-__all__ = ["StabilityReport", "stability_report", "extreme_eigenvalues", "dt_interval"]
+__all__ = ["StabilityReport", "dt_interval", "extreme_eigenvalues", "stability_report"]
 
 
 @dataclass(frozen=True)
@@ -84,7 +85,9 @@ class StabilityReport:
         if self.dt_range is not None:
             lines.append(f"  stable for T in ({self.dt_range[0]:.6g}, {self.dt_range[1]:.6g}) s")
         if self.eps_range is not None:
-            lines.append(f"  eps = {self.eps:.6g}, stable for eps in ({self.eps_range[0]:.6g}, {self.eps_range[1]:.6g})")
+            lines.append(
+                f"  eps = {self.eps:.6g}, stable for eps in ({self.eps_range[0]:.6g}, {self.eps_range[1]:.6g})"
+            )
         if self.stable:
             lines.append(f"  decay rate {self.decay_rate:.4g} 1/s, error / 1e6 in {self.steps_to_1e6:.1f} steps")
         lines.extend(f"  note: {n}" for n in self.notes)
@@ -129,13 +132,13 @@ def dt_interval(law_at: Any, dt: float, dt_search_max: float = 100.0) -> tuple[f
             return 0.0, 0.0
         dt = float(hit)
     hi = math.inf
-    for a, b in zip(np.geomspace(dt, dt_search_max, 300)[:-1], np.geomspace(dt, dt_search_max, 300)[1:], strict=True):
+    for a, b in itertools.pairwise(np.geomspace(dt, dt_search_max, 300)):
         if not stable(b):
             hi = bisect(float(a), float(b))
             break
     lo = 0.0
     down = np.geomspace(dt, dt * 1e-6, 200)
-    for a, b in zip(down[:-1], down[1:], strict=True):
+    for a, b in itertools.pairwise(down):
         if not stable(b):
             lo = bisect(float(a), float(b))
             break
@@ -182,7 +185,8 @@ def stability_report(
         dt_range = (0.0, 2.0 / (gain * lam_max))
         notes.append(
             f"Theorem 1: stable iff T g mu_min > -2, i.e. T < {dt_range[1]:.6g} s; the best T is "
-            f"2 / (lambda_min + lambda_max) = {2.0 / (gain * (lam_min + lam_max)):.6g} s with rho = (cond - 1) / (cond + 1)"
+            f"2 / (lambda_min + lambda_max) = {2.0 / (gain * (lam_min + lam_max)):.6g} s "
+            "with rho = (cond - 1) / (cond + 1)"
         )
     elif isinstance(the_law, StressFeedbackLaw):  # linear, linear_paper
         eps = the_law.eps
@@ -197,7 +201,9 @@ def stability_report(
         dt_range = dt_interval(lambda t: make_law(law, part, dyn, t, **base), dt)
         if law == "dynamic" and dyn.is_single_integrator and "K" not in params:
             g = float(params.get("gain", 1.0))
-            notes.append(f"Theorem 2: e(k+1) = (1 - g T) e(k); deadbeat at T = {1 / g:g} s, stable iff 0 < T < {2 / g:g} s")
+            notes.append(
+                f"Theorem 2: e(k+1) = (1 - g T) e(k); deadbeat at T = {1 / g:g} s, stable iff 0 < T < {2 / g:g} s"
+            )
         if law == "dynamic_distributed":
             notes.append(
                 f"{the_law.rounds} Jacobi round(s) per sample, warm-started from the previous input; not in the paper. "

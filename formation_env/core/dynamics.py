@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import ControlDimension, FormationError
 from .validation import as_array, check_shape
 
-__all__ = ["c2d_zoh", "LinearDynamics", "dare", "dlqr", "riccati_gain"]
+__all__ = ["LinearDynamics", "c2d_zoh", "dare", "dlqr", "riccati_gain"]
 
 
 def c2d_zoh(A: ArrayLike, B: ArrayLike, dt: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -169,9 +169,7 @@ def _zoh_cached(dyn: LinearDynamics, dt: float) -> tuple[NDArray[np.float64], ND
     return ad, bd
 
 
-def dare(
-    A: ArrayLike, B: ArrayLike, Q: ArrayLike | None = None, R: ArrayLike | None = None
-) -> NDArray[np.float64]:
+def dare(A: ArrayLike, B: ArrayLike, Q: ArrayLike | None = None, R: ArrayLike | None = None) -> NDArray[np.float64]:
     """Stabilising solution P of the discrete algebraic Riccati equation.
 
     With ``R`` given: A'PA - P - A'PB (R + B'PB)^-1 B'PA + Q = 0 (standard DARE).
@@ -198,7 +196,9 @@ def dare(
     try:
         P = sla.solve_discrete_are(a, b, qm, rm)
     except (np.linalg.LinAlgError, ValueError) as exc:
-        raise FormationError(f"the Riccati equation has no stabilising solution ((A, B) not stabilisable?): {exc}") from exc
+        raise FormationError(
+            f"the Riccati equation has no stabilising solution ((A, B) not stabilisable?): {exc}"
+        ) from exc
     P = (P + P.T) / 2
     g = rm + b.T @ P @ b
     res = a.T @ P @ a - P - a.T @ P @ b @ np.linalg.solve(g, b.T @ P @ a) + qm
@@ -216,15 +216,15 @@ def riccati_gain(
     P = dare(a, b, Q, R)
     p = b.shape[1]
     rm = np.zeros((p, p)) if R is None else np.asarray(R, dtype=np.float64)
-    return -np.linalg.solve(rm + b.T @ P @ b, b.T @ P @ a)
+    return np.asarray(-np.linalg.solve(rm + b.T @ P @ b, b.T @ P @ a), dtype=np.float64)
 
 
 def dlqr(
     A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.complex128]]:
     """Discrete LQR as python-control: returns (K, P, E) for u = -K x, E the closed-loop eigenvalues."""
     a = np.asarray(A, dtype=np.float64)
     b = np.asarray(B, dtype=np.float64)
     P = dare(a, b, Q, R)
     K = np.linalg.solve(np.asarray(R, dtype=np.float64) + b.T @ P @ b, b.T @ P @ a)
-    return K, P, np.linalg.eigvals(a - b @ K)
+    return np.asarray(K, dtype=np.float64), P, np.asarray(np.linalg.eigvals(a - b @ K), dtype=np.complex128)

@@ -8,12 +8,12 @@ failed, and the expected against the actual value.
 from __future__ import annotations
 
 __all__ = [
-    "FormationError",
-    "StressMatrixError",
-    "FrameworkError",
     "ControlDimension",
-    "UnstableParameterError",
+    "FormationError",
+    "FrameworkError",
     "StabilityWarning",
+    "StressMatrixError",
+    "UnstableParameterError",
 ]
 
 

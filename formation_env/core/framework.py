@@ -38,9 +38,7 @@ def check_leaders_span(positions: NDArray[np.float64], leaders: Sequence[int]) -
     """Raise ``FrameworkError`` unless the leaders' positions affinely span R^d."""
     d = positions.shape[1]
     if len(leaders) < d + 1:
-        raise FrameworkError(
-            f"leaders must number at least d + 1 = {d + 1} to affinely span R^{d}, got {len(leaders)}"
-        )
+        raise FrameworkError(f"leaders must number at least d + 1 = {d + 1} to affinely span R^{d}, got {len(leaders)}")
     rank = affine_rank(positions[list(leaders)])
     if rank < d:
         raise FrameworkError(
@@ -102,8 +100,7 @@ class Framework:
             raise FrameworkError("positions must have at least one coordinate (d >= 1)")
         if n < d + 2:
             raise FrameworkError(
-                f"a framework in R^{d} needs at least d + 2 = {d + 2} agents "
-                f"(d + 1 leaders and a follower), got {n}"
+                f"a framework in R^{d} needs at least d + 2 = {d + 2} agents (d + 1 leaders and a follower), got {n}"
             )
         lead = tuple(int(i) for i in leaders)
         if len(set(lead)) != len(lead):

@@ -26,6 +26,7 @@ matrices whose spectral radius is the closed loop's (see ``mode_matrices``).
 
 from __future__ import annotations
 
+import itertools
 from abc import ABC, abstractmethod
 from typing import Any
 
@@ -39,12 +40,12 @@ from .stress import Partition
 
 __all__ = [
     "LAWS",
-    "FollowerLaw",
-    "StressFeedbackLaw",
-    "PaperLinearLaw",
     "DynamicLeaderLaw",
-    "make_law",
+    "FollowerLaw",
+    "PaperLinearLaw",
+    "StressFeedbackLaw",
     "gamma_interval",
+    "make_law",
 ]
 
 LAWS = ("stationary", "linear", "linear_paper", "dynamic", "dynamic_distributed")
@@ -140,7 +141,7 @@ def _omega_ff_eigenvalues(part: Partition) -> Array:
             f"mode analysis of a sparse stress with {part.n_f} followers needs the full spectrum of Omega_ff; "
             "use formation_env.core.analysis.extreme_eigenvalues for the bounds instead"
         )
-    return np.linalg.eigvalsh(part.omega_ff_dense)
+    return np.asarray(np.linalg.eigvalsh(part.omega_ff_dense), dtype=np.float64)
 
 
 def gamma_interval(A_d: Array, B_d: Array, K: Array, gamma_max: float = 1e3) -> tuple[float, float]:
@@ -160,13 +161,13 @@ def gamma_interval(A_d: Array, B_d: Array, K: Array, gamma_max: float = 1e3) -> 
         )
     grid = np.geomspace(1.0, gamma_max, 400)
     hi = gamma_max
-    for a, b in zip(grid[:-1], grid[1:], strict=True):
+    for a, b in itertools.pairwise(grid):
         if rho(b) >= 1.0:
             hi = _bisect(rho, a, b)
             break
     grid = np.geomspace(1.0, 1.0 / gamma_max, 400)
     lo = 0.0
-    for a, b in zip(grid[:-1], grid[1:], strict=True):
+    for a, b in itertools.pairwise(grid):
         if rho(b) >= 1.0:
             lo = _bisect(rho, a, b)
             break
@@ -292,9 +293,7 @@ class PaperLinearLaw(StressFeedbackLaw):
         from scipy.optimize import minimize_scalar
 
         _, hi = StressFeedbackLaw.eps_range(self)
-        res = minimize_scalar(
-            lambda e: _spectral_radius(self._literal_modes(e)), bounds=(0.0, hi), method="bounded"
-        )
+        res = minimize_scalar(lambda e: _spectral_radius(self._literal_modes(e)), bounds=(0.0, hi), method="bounded")
         return float(res.x)
 
     def _literal_modes(self, eps: float) -> Array:
@@ -407,7 +406,7 @@ class DynamicLeaderLaw(FollowerLaw):
         nf = self.part.n_f
         a, b, k = self.A_d, self.B_d, self.K
         if self.rounds is None:
-            return np.kron(np.eye(nf), a + b @ k)
+            return np.asarray(np.kron(np.eye(nf), a + b @ k), dtype=np.float64)
         jm = np.linalg.matrix_power(-self._nff_dense() / self._diag[:, None], self.rounds)
         ij = np.eye(nf) - jm
         top = np.hstack([np.kron(np.eye(nf), a) + np.kron(ij, b @ k), np.kron(jm, b)])

@@ -5,7 +5,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -17,7 +17,7 @@ from .laws import FollowerLaw, make_law
 from .stress import Partition
 from .validation import as_array
 
-__all__ = ["simulate", "SimResult"]
+__all__ = ["SimResult", "simulate"]
 
 Array = NDArray[np.float64]
 
@@ -47,7 +47,7 @@ class SimResult:
     @property
     def times(self) -> Array:
         """Sample times (s), shape (steps + 1,)."""
-        return np.arange(self.positions.shape[0]) * self.dt
+        return np.arange(self.positions.shape[0], dtype=np.float64) * self.dt
 
 
 def _leader_states(value: ArrayLike, n_l: int, dyn: LinearDynamics, k: int) -> Array:
@@ -57,6 +57,40 @@ def _leader_states(value: ArrayLike, n_l: int, dyn: LinearDynamics, k: int) -> A
     if v.shape == (n_l, dyn.d):
         return dyn.state_from_position(v)
     raise ControlDimension(f"leader_path({k}) must return shape ({n_l}, {dyn.d}) or ({n_l}, {dyn.q}), got {v.shape}")
+
+
+@overload
+def simulate(
+    omega: Any,
+    leaders: Sequence[int],
+    x0: ArrayLike,
+    dt: float = ...,
+    steps: int = ...,
+    law: str = ...,
+    leader_path: Callable[[int], ArrayLike] | None = ...,
+    dynamics: LinearDynamics | None = ...,
+    *,
+    require_stable_law: bool = ...,
+    return_result: Literal[False] = ...,
+    **params: Any,
+) -> Array: ...
+
+
+@overload
+def simulate(
+    omega: Any,
+    leaders: Sequence[int],
+    x0: ArrayLike,
+    dt: float = ...,
+    steps: int = ...,
+    law: str = ...,
+    leader_path: Callable[[int], ArrayLike] | None = ...,
+    dynamics: LinearDynamics | None = ...,
+    *,
+    require_stable_law: bool = ...,
+    return_result: Literal[True],
+    **params: Any,
+) -> SimResult: ...
 
 
 def simulate(

@@ -15,9 +15,8 @@ sparse path never forms a dense eigendecomposition.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
 from functools import cached_property
-from typing import Any, Union
+from typing import Any, TypeAlias
 
 import numpy as np
 import scipy.linalg as sla
@@ -30,19 +29,20 @@ from .framework import Framework, check_leaders_span
 from .validation import as_array, check_finite
 
 __all__ = [
-    "StressLike",
     "DEFAULT_RTOL",
-    "stress_from_weights",
-    "weights_from_stress",
-    "equilibrium_stress_basis",
-    "check_stress",
-    "project_stress",
     "Partition",
+    "StressLike",
+    "check_stress",
+    "equilibrium_stress_basis",
     "follower_targets",
     "is_sparse_dense_threshold",
+    "project_stress",
+    "stress_from_weights",
+    "weights_from_stress",
 ]
 
-StressLike = Union[NDArray[np.float64], sp.spmatrix, sp.sparray]
+#: A dense (n, n) array or a scipy.sparse matrix.
+StressLike: TypeAlias = Any
 
 #: Default relative tolerance of every check (relative to the largest |eigenvalue| or entry).
 DEFAULT_RTOL = 1e-8
@@ -111,7 +111,8 @@ def equilibrium_stress_basis(fw: Framework, rtol: float = 1e-10) -> NDArray[np.f
 
 def _scale(omega: StressLike) -> float:
     if sp.issparse(omega):
-        return float(abs(omega).max()) if omega.nnz else 0.0
+        mat = sp.csr_matrix(omega)
+        return float(abs(mat).max()) if mat.nnz else 0.0
     return float(np.max(np.abs(omega))) if omega.size else 0.0
 
 
@@ -143,7 +144,7 @@ def check_stress(
         FrameworkError: the leaders do not affinely span R^d.
     """
     omega = _as_stress(omega)
-    n, d = fw.n, fw.d
+    n = fw.n
     if omega.shape != (n, n):
         raise StressMatrixError(f"omega must have shape ({n}, {n}) for this framework, got {omega.shape}")
     scale = _scale(omega)
@@ -159,25 +160,25 @@ def check_stress(
     worst = int(np.argmax(np.abs(rowsum)))
     if abs(rowsum[worst]) > tol * np.sqrt(n):
         raise StressMatrixError(
-            f"omega rows must sum to zero: row {worst} sums to {rowsum[worst]:.3g} "
-            f"(tolerance {tol * np.sqrt(n):.3g})"
+            f"omega rows must sum to zero: row {worst} sums to {rowsum[worst]:.3g} (tolerance {tol * np.sqrt(n):.3g})"
         )
     resid = np.asarray(omega @ r)
     worst = int(np.argmax(np.max(np.abs(resid), axis=1)))
     if np.max(np.abs(resid)) > tol * rscale * np.sqrt(n):
         raise StressMatrixError(
             f"omega is not an equilibrium stress of the nominal positions: Omega r = 0 fails at "
-            f"agent {worst} with residual {np.max(np.abs(resid[worst])):.3g} (tolerance {tol * rscale * np.sqrt(n):.3g})"
+            f"agent {worst} with residual {np.max(np.abs(resid[worst])):.3g} "
+            f"(tolerance {tol * rscale * np.sqrt(n):.3g})"
         )
     if check_graph:
         allowed = {(i, j) for i, j in fw.edges}
         coo = sp.coo_matrix(omega)
         off = (coo.row < coo.col) & (np.abs(coo.data) > tol)
-        for i, j in zip(coo.row[off], coo.col[off], strict=True):
+        for i, j, v in zip(coo.row[off], coo.col[off], coo.data[off], strict=True):
             if (int(i), int(j)) not in allowed:
                 raise StressMatrixError(
-                    f"omega has a nonzero entry Omega[{i}, {j}] = {coo.data[off][0]:.3g} but ({i}, {j}) is not an "
-                    "edge of the graph: the control law would not be distributed"
+                    f"omega has a nonzero entry Omega[{i}, {j}] = {v:.3g} but ({i}, {j}) is not an edge of the "
+                    "graph: the control law would not be distributed"
                 )
     check_leaders_span(r, fw.leaders)
     if sp.issparse(omega):

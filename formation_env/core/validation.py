@@ -14,7 +14,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import ControlDimension, FormationError
 
-__all__ = ["as_array", "check_shape", "check_finite", "check_kwargs_consumed"]
+__all__ = ["as_array", "check_finite", "check_kwargs_consumed", "check_shape"]
 
 
 def as_array(x: ArrayLike, name: str, ndim: int | None = None) -> NDArray[np.float64]:
@@ -43,9 +43,7 @@ def check_finite(arr: NDArray[Any], name: str) -> None:
 
 def check_shape(arr: NDArray[Any], expected: tuple[int | None, ...], name: str) -> None:
     """Raise ``ControlDimension`` unless ``arr.shape`` matches ``expected`` (None = any)."""
-    ok = arr.ndim == len(expected) and all(
-        e is None or e == s for e, s in zip(expected, arr.shape, strict=True)
-    )
+    ok = arr.ndim == len(expected) and all(e is None or e == s for e, s in zip(expected, arr.shape, strict=True))
     if not ok:
         want = "(" + ", ".join("*" if e is None else str(e) for e in expected) + ")"
         raise ControlDimension(f"{name} must have shape {want}, got {arr.shape}")

@@ -1,0 +1,1 @@
+"""The environment layer: engine, scenarios, PettingZoo env and rendering."""

@@ -57,6 +57,40 @@ def cmd_bench(args: argparse.Namespace) -> int:
     return bench_main(argv)
 
 
+def cmd_rollout(args: argparse.Namespace) -> int:
+    """Roll out one episode of a scenario and save it as a GIF or MP4."""
+    import numpy as np
+
+    from . import formation_v0
+    from .env.video import save_animation
+
+    kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
+    env = formation_v0.parallel_env(scenario=args.scenario, render_mode="rgb_array", **kwargs)
+    obs, _ = env.reset(seed=args.seed)
+    policy = None
+    if args.policy != "random":
+        from agents import load_policy
+
+        policy = load_policy(args.policy, env)
+    rng = np.random.default_rng(args.seed)
+    frames = [env.render()]
+    info: dict[str, Any] = {}
+    for _ in range(args.steps):
+        if not env.agents:
+            break
+        if policy is None:
+            actions = {a: rng.uniform(-1, 1, env.action_space(a).shape).astype(np.float32) for a in env.agents}
+        else:
+            actions = policy.act_parallel(obs, env)
+        obs, _, _, _, infos = env.step(actions)
+        info = next(iter(infos.values()), info)
+        frames.append(env.render())
+    env.close()
+    path = save_animation(frames, args.out, fps=args.fps)
+    print(f"wrote {path} ({len(frames)} frames); last info: {info}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="formation-env", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -69,6 +103,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quick", action="store_true", help="fewer evaluation episodes")
     p.set_defaults(func=cmd_report)
+    p = sub.add_parser("rollout", help="render one episode to a GIF or MP4")
+    p.add_argument("--scenario", default="narrow_passage")
+    p.add_argument("--policy", default="random", help="random, analytic, or a saved model's path")
+    p.add_argument("--steps", type=int, default=400)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--fps", type=int, default=20)
+    p.add_argument("--env-kwargs", default="", help='JSON dict of env arguments, e.g. {"dt": 0.05}')
+    p.add_argument("--out", default="out/rollout.gif", help="output .gif or .mp4")
+    p.set_defaults(func=cmd_rollout)
     p = sub.add_parser("bench", help="run the benchmarks and write BENCHMARKS.md")
     p.add_argument("--only", nargs="*", help="sections (core, design, env)")
     p.add_argument("--quick", action="store_true")

@@ -275,8 +275,8 @@ class PaperLinearLaw(StressFeedbackLaw):
     """The paper's literal general-linear law u = [(I - eps Omega) kron K] x (eq. 25).
 
     Kept to show its defect: the "+ x_i" term (the identity) feeds K x_f back
-    towards the origin, so the followers settle where
-    [I kron (A + BK) - eps Omega_ff kron BK] x_f = eps (Omega_fl kron BK) x_l,
+    towards the origin, so the followers settle at the rest point x_f = M x_f - eps (Omega_fl kron BK) x_l
+    of their closed loop M = I kron (A + BK) - eps Omega_ff kron BK (:meth:`closed_loop`),
     not on the affine targets (and the stress term has the opposite sign of the
     local form eq. 24). :attr:`tracks_targets` is False: the error is not an
     autonomous state, so :meth:`mode_matrices` gives the followers' own dynamics.
@@ -328,8 +328,10 @@ class DynamicLeaderLaw(FollowerLaw):
     Jacobi rounds over the communication graph, starting from its previous
     input: u^(r) = D^-1 [(Omega x)_f K' - N_ff u^(r-1) - Omega_fl u_l], with
     D = diag(Omega_ff), N_ff = Omega_ff - D. With J = -D^-1 N_ff (real
-    eigenvalues nu) and c = nu^m, each mode of (e, s = u(k-1) - a*) obeys
-    [[A + (1 - c) B K, c B], [(1 - c) K, c I]]. This is not in the paper, and it
+    eigenvalues nu) and c = nu^m, each mode of (e, s = u(k-1) - L u_l) obeys
+    [[A + (1 - c) B K, c B], [(1 - c) K, c I]] for constant leader inputs u_l
+    (L u_l is the followers' input at zero error; s starts at -L u_l, the
+    memory at 0). This is not in the paper, and it
     can be unstable where the exact law is not: on the paper's example one round
     diverges at T = 1 and converges at T = 0.1 (see ``stability_report``).
     """

@@ -1,0 +1,219 @@
+"""``FormationCommander-v0``: one Gymnasium policy commands every leader (single-agent view).
+
+Registered on ``import formation_env`` as ``gym.make("formation_env/FormationCommander-v0", ...)``.
+Same engine and scenarios as the PettingZoo env (B = 1).
+"""
+
+from __future__ import annotations
+
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from numpy.typing import NDArray
+
+from formation_env.core.errors import FormationError
+
+from .control import track_targets
+from .engine import Engine, EngineState
+from .scenarios._base import affine_batch, rotation_3d
+
+__all__ = ["ACTION_MODES", "FormationCommanderEnv"]
+
+ACTION_MODES = ("leaders", "maneuver")
+Array = NDArray[np.float64]
+
+
+class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+    """A single-agent view of the formation env: one action commands all leaders.
+
+    ## Description
+
+    The scenario, dynamics, follower law and reward terms of ``formation_v0`` (see
+    :class:`formation_env.env.formation.FormationEnv`), with one policy for the whole team.
+
+    ## Action Space
+
+    ``action_mode="leaders"``: ``Box(-1, 1, (n_l p,))``, every leader's action concatenated in
+    leader order (scaled by ``u_max`` as in ``formation_v0``; clipped; NaN/inf raise ValueError).
+
+    ``action_mode="maneuver"``: ``Box(-1, 1, (d (d + 1),))`` sets rates of a commanded pose
+    Theta_c = R (I + H) diag(s), b_c: [velocity of b_c (d) | log-scale rates of s per axis (d) |
+    rotation rate (2D: 1, angle; 3D: 3, rotation vector) | shear rates of the strictly upper
+    triangle of H (d (d - 1) / 2)], scaled by ``pose_speed`` (m/s), ``scale_rate`` (1/s),
+    ``rotation_rate`` (rad/s), ``shear_rate`` (1/s). s is kept in ``scale_range``, H in [-1, 1],
+    b_c in the world box. The leaders track their targets Theta_c r_l + b_c with saturated
+    commands (``control.track_targets``). The pose starts as the QR factors of the start pose.
+
+    ## Observation Space
+
+    The global state (``FormationEnv.state()``), float32, finite bounds; in ``maneuver`` mode
+    followed by the commanded Theta_c (d^2, row-major, in [-6, 6]) and b_c (d, world box).
+
+    ## Rewards
+
+    The mean over leaders of the ``formation_v0`` leader rewards.
+
+    ## Starting State, Episode End
+
+    As ``formation_v0``. ``info`` holds the same metrics (``control_effort`` summed over leaders).
+
+    ## Arguments
+
+    ``gym.make("formation_env/FormationCommander-v0", scenario="narrow_passage",
+    action_mode="leaders", render_mode=None, **kwargs)`` with the keyword arguments of
+    ``formation_v0.parallel_env`` and, for ``maneuver``, ``pose_speed`` (1.0), ``scale_rate`` (0.5),
+    ``rotation_rate`` (0.5), ``shear_rate`` (0.5), ``scale_range`` ((0.2, 2.0)).
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    metadata: dict[str, Any] = {"render_modes": ["human", "rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        scenario: str = "narrow_passage",
+        action_mode: str = "leaders",
+        render_mode: str | None = None,
+        *,
+        pose_speed: float = 1.0,
+        scale_rate: float = 0.5,
+        rotation_rate: float = 0.5,
+        shear_rate: float = 0.5,
+        scale_range: tuple[float, float] = (0.2, 2.0),
+        **kwargs: Any,
+    ) -> None:
+        if action_mode not in ACTION_MODES:
+            raise FormationError(f"action_mode must be one of {list(ACTION_MODES)}, got {action_mode!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise FormationError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        self.engine = eng = Engine(scenario, **kwargs)
+        self.action_mode = action_mode
+        self.render_mode = render_mode
+        d = eng.d
+        self.rates = np.array([pose_speed, scale_rate, rotation_rate, shear_rate], dtype=np.float64)
+        if not (np.all(np.isfinite(self.rates)) and np.all(self.rates > 0)):
+            raise FormationError(
+                f"pose_speed, scale_rate, rotation_rate, shear_rate must be positive, got {self.rates}"
+            )
+        self.scale_range = (float(scale_range[0]), float(scale_range[1]))
+        if not 0 < self.scale_range[0] < 1 < self.scale_range[1]:
+            raise FormationError(f"scale_range must satisfy 0 < lo < 1 < hi, got {scale_range}")
+        self._iu = np.triu_indices(d, 1)
+        low, high = eng.state_low, eng.state_high
+        self._n_act = eng.n_l * eng.p if action_mode == "leaders" else d * (d + 1)
+        self.action_space = spaces.Box(-1.0, 1.0, (self._n_act,), dtype=np.float32)
+        if action_mode == "maneuver":
+            low = np.concatenate([low, np.full(d * d, -6.0, np.float32), eng.bounds[0].astype(np.float32)])
+            high = np.concatenate([high, np.full(d * d, 6.0, np.float32), eng.bounds[1].astype(np.float32)])
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self._obs_low, self._obs_high = low, high
+        self._state: EngineState | None = None
+        self._pose: dict[str, Array] = {}
+        self._renderer: Any = None
+
+    # ------------------------------------------------------------------ pose (maneuver mode), batched
+    def _theta(self) -> Array:
+        p = self._pose
+        u = np.eye(self.engine.d) + p["H"]
+        return p["R"] @ (u * p["s"][:, None, :])
+
+    def _init_pose(self, state: EngineState) -> None:
+        theta, b = self.engine.affine.fit(state.pos)
+        q, r = np.linalg.qr(theta)
+        sign = np.sign(np.diagonal(r, axis1=-2, axis2=-1))
+        sign[sign == 0] = 1.0
+        q, r = q * sign[:, None, :], r * sign[:, :, None]
+        s = np.clip(np.diagonal(r, axis1=-2, axis2=-1), *self.scale_range)
+        H = np.triu(r / np.diagonal(r, axis1=-2, axis2=-1)[:, None, :], 1)
+        self._pose = {"R": q, "s": s, "H": np.clip(H, -1.0, 1.0), "b": b}
+
+    def _advance_pose(self, a: Array) -> None:
+        d, dt, p = self.engine.d, self.engine.dt, self._pose
+        v, sc, rot, sh = np.split(a, [d, 2 * d, 2 * d + len(self._iu[0])], axis=-1)
+        lo, hi = self.engine.bounds
+        p["b"] = np.clip(p["b"] + self.rates[0] * dt * v, lo, hi)
+        p["s"] = np.clip(p["s"] * np.exp(self.rates[1] * dt * sc), *self.scale_range)
+        ang = self.rates[2] * dt * rot
+        if d == 2:
+            c, s_ = np.cos(ang[:, 0]), np.sin(ang[:, 0])
+            step = np.stack([np.stack([c, -s_], -1), np.stack([s_, c], -1)], -2)
+        else:
+            norm = np.linalg.norm(ang, axis=-1)
+            axis = np.where(norm[:, None] > 0, ang, np.array([0.0, 0.0, 1.0]))
+            step = rotation_3d(axis, norm)
+        p["R"] = step @ p["R"]
+        H = p["H"].copy()
+        H[:, self._iu[0], self._iu[1]] = np.clip(H[:, self._iu[0], self._iu[1]] + self.rates[3] * dt * sh, -1.0, 1.0)
+        p["H"] = H
+
+    # ------------------------------------------------------------------ gym API
+    def _obs(self) -> NDArray[np.float32]:
+        assert self._state is not None
+        g = self.engine.global_state(self._state)[0]
+        if self.action_mode == "leaders":
+            return g
+        extra = np.concatenate([self._theta()[0].reshape(-1), self._pose["b"][0]]).astype(np.float32)
+        return np.clip(np.concatenate([g, extra]), self._obs_low, self._obs_high)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        super().reset(seed=seed)
+        self._state = self.engine.reset(self.np_random, 1)
+        if self.action_mode == "maneuver":
+            self._init_pose(self._state)
+        self._trail = [self._state.pos[0]]
+        if self.render_mode == "human":
+            self.render()
+        return self._obs(), {}
+
+    def step(self, action: Any) -> tuple[NDArray[np.float32], SupportsFloat, bool, bool, dict[str, Any]]:
+        if self._state is None:
+            raise FormationError("call reset() before step()")
+        eng = self.engine
+        a = np.asarray(action, dtype=np.float64).reshape(1, -1)
+        if a.shape[1] != self._n_act:
+            raise ValueError(f"action must have shape {self.action_space.shape}, got {np.shape(action)}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action holds NaN or inf: {a[0].tolist()}; the state is unchanged")
+        if self.action_mode == "leaders":
+            leader_a = a.reshape(1, eng.n_l, eng.p)
+        else:
+            a = np.clip(a, -1.0, 1.0)
+            rl = eng.fw.positions[eng.leaders]
+            before = affine_batch(rl, self._theta(), self._pose["b"])
+            self._advance_pose(a)
+            after = affine_batch(rl, self._theta(), self._pose["b"])
+            leader_a = track_targets(eng, self._state, after, (after - before) / eng.dt)
+        self._state, _, rew, term, trunc, info = eng.step(self._state, leader_a)
+        out = {k: v[0].item() for k, v in info.items() if k != "control_effort"}
+        out["control_effort"] = float(info["control_effort"][0].sum())
+        self._trail.append(self._state.pos[0])
+        del self._trail[:-60]
+        if self.render_mode == "human":
+            self.render()
+        return self._obs(), float(rew[0].mean()), bool(term[0]), bool(trunc[0]), out
+
+    def render(self) -> NDArray[np.uint8] | None:
+        if self.render_mode is None:
+            gym.logger.warn("render() called with render_mode=None: nothing to draw")
+            return None
+        if self._state is None:
+            raise FormationError("call reset() before render()")
+        if self._renderer is None:
+            from .rendering import Renderer
+
+            self._renderer = Renderer(self.engine.d, self.render_mode, fps=self.metadata["render_fps"])
+        frame = self.engine.frame(self._state, 0, np.stack(self._trail))
+        return self._renderer.draw(frame)
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,997 @@
+"""The batched formation engine: a pure ``step(state, actions)`` over a leading batch dim B.
+
+Every array in :class:`EngineState` starts with the batch dim B (VMAS style), so the
+PettingZoo env (B = 1) and a vectorised env (B = 1024) share one step function. The
+engine holds only constants; the state is passed in and a new state is returned
+(gymnax style). Randomness comes only from the ``np.random.Generator`` given to
+:meth:`Engine.reset`.
+
+Speed: the followers' analytic law, the leaders' sampled dynamics, positions,
+velocities, the affine-image residual and every observation entry that is linear in
+the state are folded at construction into one matrix, so a step is one matmul plus
+the nonlinear parts (norms, obstacle geometry, clipping). The matrix is read off the
+core law by probing ``FollowerLaw.step`` with unit vectors (every law is linear in
+x, u_l and its memory) and is cached per configuration.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import Any, NamedTuple
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from formation_env.core.affine import AffineImage
+from formation_env.core.dynamics import LinearDynamics
+from formation_env.core.errors import ControlDimension, FormationError, StabilityWarning
+from formation_env.core.framework import Framework
+from formation_env.core.laws import FollowerLaw, make_law
+from formation_env.core.stress import Partition, check_stress
+
+from . import geometry
+from .scenarios import CLASSES, NAMED_FRAMEWORKS, REGISTRY
+from .scenarios._base import Scenario, affine_batch, gram_stress
+
+__all__ = [
+    "DYNAMICS",
+    "FOLLOWER_LAWS",
+    "Engine",
+    "EngineState",
+    "check_combination",
+    "offered_combinations",
+    "resolve_dynamics",
+    "resolve_framework",
+]
+
+Array = NDArray[np.float64]
+
+#: Follower laws the env offers (``linear_paper`` is left out: its followers do not track, see core.laws).
+FOLLOWER_LAWS: tuple[str, ...] = ("stationary", "dynamic", "dynamic_distributed", "linear")
+#: Named dynamics (a ``LinearDynamics`` is accepted too).
+DYNAMICS: tuple[str, ...] = ("single_integrator", "double_integrator")
+#: Reward term names (see ``FormationEnv``'s Rewards section).
+REWARD_TERMS: tuple[str, ...] = ("progress", "distance", "formation", "collision", "effort", "success")
+#: Largest framework the engine takes (its folded matrices grow as n^2).
+MAX_AGENTS = 256
+#: Above this many agents, agent-agent contacts are checked along the graph's edges only.
+ALL_PAIRS_UP_TO = 64
+
+
+# ---------------------------------------------------------------------------- configuration
+def resolve_dynamics(dynamics: str | LinearDynamics, d: int) -> LinearDynamics:
+    """``"single_integrator"`` | ``"double_integrator"`` in R^d, or a ``LinearDynamics`` with position dim d."""
+    if isinstance(dynamics, LinearDynamics):
+        if dynamics.d != d:
+            raise ControlDimension(f"dynamics has position dimension {dynamics.d}, the framework is in R^{d}")
+        return dynamics
+    if dynamics == "single_integrator":
+        return LinearDynamics.single_integrator(d)
+    if dynamics == "double_integrator":
+        return LinearDynamics.double_integrator(d)
+    raise FormationError(f"unknown dynamics {dynamics!r}; choose one of {list(DYNAMICS)} or pass a LinearDynamics")
+
+
+def check_combination(follower_law: str, dynamics: LinearDynamics) -> None:
+    """Refuse law/dynamics pairs the env does not offer, with the reason.
+
+    ``stationary`` (eq. 17) is for single integrators only; ``linear_paper`` is not offered.
+    """
+    if follower_law not in FOLLOWER_LAWS:
+        extra = " (linear_paper is the paper's literal eq. 25, whose followers do not track)" * (
+            follower_law == "linear_paper"
+        )
+        raise FormationError(f"unknown follower_law {follower_law!r}{extra}; choose one of {list(FOLLOWER_LAWS)}")
+    if follower_law == "stationary" and not dynamics.is_single_integrator:
+        raise FormationError(
+            f"follower_law='stationary' (eq. 17) needs single_integrator dynamics, got {dynamics.name}; "
+            "use 'dynamic', 'dynamic_distributed' or 'linear'"
+        )
+
+
+def offered_combinations() -> list[tuple[str, str, str]]:
+    """Every (scenario, dynamics, follower_law) the env offers, for parametrised tests."""
+    return [
+        (s, dyn, law)
+        for s in REGISTRY
+        for dyn in DYNAMICS
+        for law in FOLLOWER_LAWS
+        if not (law == "stationary" and dyn != "single_integrator")
+    ]
+
+
+def _designed_stress(fw: Framework) -> Array:
+    complete = len(fw.edges) == fw.n * (fw.n - 1) // 2
+    try:
+        from formation_env.core.design import design_stress  # lazily: the design module may be absent
+    except ImportError:
+        if complete:
+            return gram_stress(fw)
+        raise FormationError(
+            f"framework {fw.name or '(custom)'} has no stress matrix: pass omega=..., or install "
+            "formation_env.core.design (design_stress); a complete graph gets the Gram stress"
+        ) from None
+    res = design_stress(fw)
+    return np.asarray(getattr(res, "omega", res), dtype=np.float64)
+
+
+def resolve_framework(
+    framework: str | Framework | None, omega: ArrayLike | None, default: str
+) -> tuple[Framework, Array]:
+    """The framework and its checked stress matrix.
+
+    Args:
+        framework: a name (``NAMED_FRAMEWORKS`` or a function of ``formation_env.core.frameworks``),
+            a ``Framework``, or None for ``default``.
+        omega: stress matrix (n, n); None takes the named one, or designs one.
+    Raises:
+        FormationError: unknown name; StressMatrixError: omega fails ``check_stress``.
+    """
+    name = default if framework is None else framework
+    om: Array | None = None
+    if isinstance(name, str):
+        if name in NAMED_FRAMEWORKS:
+            fw, om = NAMED_FRAMEWORKS[name]()
+        else:
+            from formation_env.core import frameworks as lib
+
+            fn = getattr(lib, name, None)
+            if name.startswith("_") or not callable(fn):
+                raise FormationError(
+                    f"unknown framework {name!r}; named ones are {sorted(NAMED_FRAMEWORKS)} and the functions of "
+                    "formation_env.core.frameworks, or pass a Framework"
+                )
+            fw = fn()
+            if not isinstance(fw, Framework):
+                raise FormationError(f"formation_env.core.frameworks.{name}() did not return a Framework")
+    elif isinstance(name, Framework):
+        fw = name
+    else:
+        raise TypeError(f"framework must be a name or a Framework, got {type(name).__name__}")
+    if omega is not None:
+        om = np.asarray(omega, dtype=np.float64)
+    if om is None:
+        om = _designed_stress(fw)
+    check_stress(om, fw)
+    return fw, om
+
+
+# ---------------------------------------------------------------------------- the folded step map
+_MAP_CACHE: dict[tuple[Any, ...], tuple[FollowerLaw, Array, float]] = {}
+
+
+def _key(x: Any) -> Any:
+    if isinstance(x, np.ndarray):
+        return (x.shape, x.tobytes())
+    if isinstance(x, dict):
+        return tuple(sorted((k, _key(v)) for k, v in x.items()))
+    return x
+
+
+def _law_and_map(
+    omega: Array, leaders: tuple[int, ...], dyn: LinearDynamics, law_name: str, dt: float, params: dict[str, Any]
+) -> tuple[FollowerLaw, Array, float]:
+    """The law, its one-step linear map M with [x', mem'] = [x, u_l, mem] @ M, and its spectral radius."""
+    key = (_key(omega), leaders, _key(dyn.A), _key(dyn.B), _key(dyn.C), dyn.discrete, law_name, dt, _key(params))
+    hit = _MAP_CACHE.get(key)
+    if hit is not None:
+        return hit
+    part = Partition(omega, leaders)
+    law = make_law(law_name, part, dyn, dt, **params)
+    n, q, p = part.n, dyn.q, dyn.p
+    mem0 = law.initial_memory((1,))
+    m = 0 if mem0 is None else int(mem0[0].size)
+    z = n * q + part.n_l * p + m
+    eye = np.eye(z)
+    xs = eye[:, : n * q].reshape(z, n, q)
+    us = eye[:, n * q : n * q + part.n_l * p].reshape(z, part.n_l, p)
+    ms = None if m == 0 else eye[:, n * q + part.n_l * p :].reshape(z, part.n_f, p)
+    x1, mem1 = law.step(xs, us, ms)
+    cols = [x1.reshape(z, -1)] + ([] if mem1 is None else [np.asarray(mem1).reshape(z, -1)])
+    mat = np.concatenate(cols, axis=1)
+    try:
+        rho = float(law.spectral_radius())
+    except FormationError:
+        rho = float("nan")
+    if len(_MAP_CACHE) > 64:
+        _MAP_CACHE.clear()
+    _MAP_CACHE[key] = (law, mat, rho)
+    return law, mat, rho
+
+
+def _fewest_stable_rounds(
+    omega: Array, leaders: tuple[int, ...], dyn: LinearDynamics, dt: float, params: dict[str, Any], most: int = 30
+) -> int:
+    """The fewest Jacobi rounds m <= ``most`` whose ``dynamic_distributed`` closed loop is stable (else 1).
+
+    Odd m can be unstable where even m is not (a negative Jacobi eigenvalue nu gives c = nu^m < 0):
+    on the paper's framework with double integrators at T = 0.1, m = 1 diverges and m = 2 converges.
+    """
+    for m in range(1, most + 1):
+        if _law_and_map(omega, leaders, dyn, "dynamic_distributed", dt, {**params, "rounds": m})[2] < 1.0:
+            return m
+    return 1
+
+
+# ---------------------------------------------------------------------------- state
+class EngineState(NamedTuple):
+    """Everything that changes during an episode, batched over B environments (immutable; steps make new ones).
+
+    Attributes:
+        x: agent states, shape (B, n, q).
+        pos: positions C x, shape (B, n, d), m.
+        vel: velocities, shape (B, n, d), m/s (C A x when C B = 0, e.g. double integrators;
+            else the mean velocity over the last sample, e.g. the applied single-integrator command).
+        memory: follower-law memory (``dynamic_distributed``: previous inputs), shape (B, n_f, p), or None.
+        k: samples taken, shape (B,) int.
+        ref: the step's exogenous inputs [goal (n d), goal velocity (n d), 1, k], shape (B, 2 n d + 2):
+            goal (reference) positions x_i* (m) and their velocity (m/s, zero for static goals).
+        goal_dist: each leader's distance to its goal position, shape (B, n_l), m.
+        err: affine-image formation error, shape (B,), m.
+        streak: consecutive successful samples, shape (B,) int.
+        params: per-episode arrays (B, ...): the scenario's (goal pose, ``segments``, ``circles``, its own
+            parameters) and derived ones (keys starting with "_"), all read-only.
+    """
+
+    x: Array
+    pos: Array
+    vel: Array
+    memory: Array | None
+    k: NDArray[np.int64]
+    ref: Array
+    goal_dist: Array
+    err: Array
+    streak: NDArray[np.int64]
+    params: dict[str, Array]
+
+    @property
+    def batch_size(self) -> int:
+        """B."""
+        return int(self.x.shape[0])
+
+    @property
+    def goal(self) -> Array:
+        """Goal (reference) positions of every agent, shape (B, n, d), m."""
+        b, n, d = self.pos.shape
+        return self.ref[:, : n * d].reshape(b, n, d)
+
+    @property
+    def goal_vel(self) -> Array:
+        """Velocity of the goal positions, shape (B, n, d), m/s."""
+        b, n, d = self.pos.shape
+        return self.ref[:, n * d : 2 * n * d].reshape(b, n, d)
+
+
+# ---------------------------------------------------------------------------- engine
+class Engine:
+    """Scenario + framework + dynamics + follower law, stepped in batches (see the module docstring).
+
+    Args:
+        scenario: a ``scenarios.REGISTRY`` name.
+        dynamics: ``"single_integrator"`` | ``"double_integrator"`` | a ``LinearDynamics`` (every agent).
+        follower_law: one of ``FOLLOWER_LAWS``; the followers run it inside the engine.
+        dt: sampling period T (s).
+        max_cycles: samples per episode before truncation.
+        framework: a framework name, a ``Framework`` (2D or 3D, at most ``MAX_AGENTS`` agents), or None
+            for the scenario's default.
+        omega: stress matrix (n, n) for ``framework`` (None: the named one, or designed).
+        law_params: parameters of the law (``make_law``: gain, K, Q, eps, rounds). Defaults differ from
+            the core's where the core's are slow or unstable: ``stationary`` without ``gain`` takes
+            g = 2 / (T (lambda_min + lambda_max)) of Omega_ff, minimising the spectral radius (Theorem 1);
+            ``dynamic_distributed`` without ``rounds`` the fewest rounds (<= 30) with a stable closed loop.
+        u_max: leader input limit per axis: action 1 means u_max (m/s single, m/s^2 double integrator).
+        agent_radius: agent disc (ball) radius (m).
+        n_rays: 2D range-sensor rays per leader. n_nearest: 3D nearest obstacles sensed per leader.
+        sensor_range: obstacle sensing range (m).
+        max_speed: velocity bound (m/s) of observations and state (values beyond are clipped).
+        reward_weights: overrides of the scenario's reward weights (keys ``REWARD_TERMS``).
+        **scenario_kwargs: the scenario's own arguments (unknown ones raise TypeError).
+
+    Contacts (collisions): two agents closer than 2 radii (all pairs up to ``ALL_PAIRS_UP_TO`` agents,
+    graph edges beyond), an agent within one radius of a wall segment or of a circle's rim, an agent
+    centre outside the world box. They are judged at the samples, and along the whole step (swept:
+    wall crossings, path-to-circle distance) whenever some agent moved more than 2 radii / sqrt(d)
+    along an axis in that step, so that a fast agent cannot tunnel through a wall.
+    """
+
+    theta_clip: float = 3.0
+
+    def __init__(
+        self,
+        scenario: str = "narrow_passage",
+        dynamics: str | LinearDynamics = "double_integrator",
+        follower_law: str = "dynamic",
+        dt: float = 0.1,
+        max_cycles: int = 400,
+        *,
+        framework: str | Framework | None = None,
+        omega: ArrayLike | None = None,
+        law_params: dict[str, Any] | None = None,
+        u_max: float = 1.0,
+        agent_radius: float = 0.1,
+        n_rays: int = 16,
+        n_nearest: int = 2,
+        sensor_range: float = 3.0,
+        max_speed: float = 3.0,
+        reward_weights: dict[str, float] | None = None,
+        **scenario_kwargs: Any,
+    ) -> None:
+        if scenario not in REGISTRY:
+            raise FormationError(f"unknown scenario {scenario!r}; choose one of {sorted(REGISTRY)}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise FormationError(f"dt must be a positive finite sampling period in seconds, got {dt}")
+        if int(max_cycles) != max_cycles or max_cycles < 1:
+            raise FormationError(f"max_cycles must be a positive integer, got {max_cycles}")
+        for nm, val in (("u_max", u_max), ("sensor_range", sensor_range), ("max_speed", max_speed)):
+            if not (np.isfinite(val) and val > 0):
+                raise FormationError(f"{nm} must be positive and finite, got {val}")
+        if not (np.isfinite(agent_radius) and agent_radius >= 0):
+            raise FormationError(f"agent_radius must be finite and >= 0, got {agent_radius}")
+        if int(n_rays) != n_rays or n_rays < 1 or int(n_nearest) != n_nearest or n_nearest < 1:
+            raise FormationError(f"n_rays and n_nearest must be positive integers, got {n_rays}, {n_nearest}")
+        self.scenario_name = scenario
+        fw, om = resolve_framework(framework, omega, CLASSES[scenario].default_framework)
+        if fw.n > MAX_AGENTS:
+            raise FormationError(f"the env takes frameworks of at most {MAX_AGENTS} agents, got {fw.n}")
+        self.fw, self.omega = fw, om
+        self.dynamics = dyn = resolve_dynamics(dynamics, fw.d)
+        check_combination(follower_law, dyn)
+        self.follower_law = follower_law
+        self.dt = float(dt)
+        self._max_cycles = int(max_cycles)
+        self.u_max = float(u_max)
+        self.sensor_range = float(sensor_range)
+        self.agent_radius = float(agent_radius)
+        self.scenario: Scenario = REGISTRY[scenario](
+            fw, agent_radius=self.agent_radius, horizon=self.dt * self._max_cycles, **scenario_kwargs
+        )
+        weights = dict(self.scenario.reward_weights)
+        for kk, vv in (reward_weights or {}).items():
+            if kk not in REWARD_TERMS:
+                raise TypeError(f"reward_weights got unknown term {kk!r}; terms are {list(REWARD_TERMS)}")
+            weights[kk] = float(vv)
+        self.reward_weights = weights
+
+        n, d, q, p = fw.n, fw.d, dyn.q, dyn.p
+        self.n, self.d, self.q, self.p = n, d, q, p
+        self.leaders = np.asarray(fw.leaders, dtype=np.int64)
+        self.followers = np.asarray(fw.followers, dtype=np.int64)
+        self.n_l, self.n_f = self.leaders.size, self.followers.size
+        self.kind = (
+            "single_integrator"
+            if dyn.is_single_integrator
+            else "double_integrator"
+            if dyn.name == "double_integrator"
+            else "general"
+        )
+        lp = dict(law_params or {})
+        if follower_law == "stationary" and "gain" not in lp:  # the gain minimising max |1 - T g lambda_i|
+            lam = np.linalg.eigvalsh(Partition(om, fw.leaders).omega_ff_dense)
+            lp["gain"] = 2.0 / (self.dt * (lam[0] + lam[-1]))
+        if follower_law == "dynamic_distributed" and "rounds" not in lp:
+            lp["rounds"] = _fewest_stable_rounds(om, fw.leaders, dyn, self.dt, lp)
+        self.law_params = lp
+        self.law, step_map, rho = _law_and_map(om, fw.leaders, dyn, follower_law, self.dt, lp)
+        self.spectral_radius = rho
+        if rho >= 1.0:
+            warnings.warn(
+                f"follower_law={follower_law!r} at dt={dt} is unstable on this framework: spectral radius "
+                f"{rho:.4g} >= 1 (see formation_env.core.analysis.stability_report)",
+                StabilityWarning,
+                stacklevel=2,
+            )
+        mem0 = self.law.initial_memory((1,))
+        self.mem_dim = 0 if mem0 is None else int(mem0[0].size)
+        self.affine = AffineImage(fw.positions)
+        self.v_bound = max(float(max_speed), self.u_max if self.kind == "single_integrator" else 0.0)
+        self.bounds = self.scenario.bounds
+        self.n_rays, self.n_nearest = int(n_rays), int(n_nearest)
+        self._dirs = geometry.ray_directions(self.n_rays) if d == 2 else np.zeros((0, d))
+        probe = self.scenario.reset(np.random.default_rng(0), 1)
+        self.n_seg, self.n_circ = int(probe["segments"].shape[1]), int(probe["circles"].shape[1])
+        if self.n_seg and d != 2:
+            raise FormationError(f"scenario {scenario!r}: wall segments are 2D only, the framework is {d}D")
+        if n <= ALL_PAIRS_UP_TO:
+            self._pairs = np.stack(np.triu_indices(n, 1), axis=1)
+        else:
+            self._pairs = fw.edge_array()
+        self._perm = np.concatenate([self.leaders, self.followers])  # leaders first
+        self._fast = 2.0 * self.agent_radius / math.sqrt(d)
+        self._fused_success = type(self.scenario).is_success is Scenario.is_success
+        self._step_map = step_map
+        self._build_obs_layout()
+        self._build_static()
+        self._build_geometry_template()
+        self._build_bounds()
+
+    # ------------------------------------------------------------------ construction
+    @property
+    def max_cycles(self) -> int:
+        """Samples per episode before truncation (setting it rebuilds the folded step)."""
+        return self._max_cycles
+
+    @max_cycles.setter
+    def max_cycles(self, value: int) -> None:
+        if int(value) != value or value < 1:
+            raise FormationError(f"max_cycles must be a positive integer, got {value}")
+        self._max_cycles = int(value)
+        self._build_obs_layout()
+        self._build_static()
+
+    def _build_obs_layout(self) -> None:
+        """Observation blocks of one leader, and W mapping [pos, vel, ref] (B, 4 n d + 2) to its linear entries."""
+        n, d, nl = self.n, self.d, self.n_l
+        nd = n * d
+        self.obs_blocks: dict[str, slice] = {}
+        off = 0
+        ks = self.n_rays if d == 2 else self.n_nearest * d
+        sizes = {
+            "position": d,
+            "velocity": d,
+            "other_leaders": (nl - 1) * d,
+            "goal": d,
+            "goal_velocity": d,
+            "theta": d * d,
+            "time": 1,
+            "formation_error": 1,
+            "obstacles": ks,
+        }
+        for name, size in sizes.items():
+            self.obs_blocks[name] = slice(off, off + size)
+            off += size
+        self.obs_dim = off
+        L1 = self.L1 = self.obs_blocks["time"].stop  # entries linear in [pos, vel, ref]
+        pinv = self.affine._pinv  # (d + 1, n): rows of Theta^T, then b
+        sl = self.obs_blocks
+        w = np.zeros((4 * nd + 2, nl * L1))  # rows: pos, vel, goal, goal_vel, 1, k
+        for li, a in enumerate(self.leaders):
+            o = li * L1
+            others = [b for b in self.leaders if b != a]
+            for c in range(d):
+                w[a * d + c, o + sl["position"].start + c] = 1.0
+                w[nd + a * d + c, o + sl["velocity"].start + c] = 1.0
+                for jj, b in enumerate(others):
+                    col = o + sl["other_leaders"].start + jj * d + c
+                    w[b * d + c, col] += 1.0
+                    w[a * d + c, col] -= 1.0
+                w[a * d + c, o + sl["goal"].start + c] = -1.0
+                w[2 * nd + a * d + c, o + sl["goal"].start + c] = 1.0
+                w[3 * nd + a * d + c, o + sl["goal_velocity"].start + c] = 1.0
+            for i_ in range(d):  # Theta[i_, j_] = sum_m pinv[j_, m] pos[m, i_]
+                for j_ in range(d):
+                    w[np.arange(n) * d + i_, o + sl["theta"].start + i_ * d + j_] = pinv[j_]
+            w[4 * nd + 1, o + sl["time"].start] = 1.0 / self._max_cycles
+        self._w_obs = w
+
+    def _build_static(self) -> None:
+        """The folded step: z = [x, a, mem, ref] (B, Z) @ M -> [x', mem', pos', 1, vel', guard, ref', obs_lin]."""
+        n, d, q, p, nl = self.n, self.d, self.q, self.p, self.n_l
+        nq, nd = n * q, n * d
+        nr = 2 * nd + 2
+        dyn = self.dynamics
+        core = self._step_map.copy()  # rows x, u, mem; columns x', mem'
+        core[nq : nq + nl * p] *= self.u_max  # the actions a in [-1, 1] enter as u = u_max a
+        zc = core.shape[0]
+        z = zc + nr
+        core = np.concatenate([core, np.zeros((nr, core.shape[1]))], axis=0)
+        mx = core[:, :nq]
+        ck = np.kron(np.eye(n), dyn.C)  # (nd, nq)
+        mpos = mx @ ck.T
+        p0 = np.zeros((z, nd))
+        p0[:nq] = ck.T
+        self._vel_from_state = not dyn.discrete and not np.any(dyn.C @ dyn.B)
+        mvel = mx @ np.kron(np.eye(n), dyn.C @ dyn.A).T if self._vel_from_state else (mpos - p0) / self.dt
+        mref = np.zeros((z, nr))
+        mref[zc:] = np.eye(nr)
+        mref[zc + 2 * nd, 2 * nd + 1] = 1.0  # k' = k + 1 (the "1" entry of ref feeds the k column)
+        one = np.zeros((z, 1))
+        one[zc + 2 * nd] = 1.0
+        mobs = np.concatenate([mpos, mvel, mref], axis=1) @ self._w_obs
+        blocks: list[tuple[str, Array]] = [("x", core[:, :nq]), ("mem", core[:, nq:]), ("pos", mpos), ("one", one)]
+        # guard: world-box margins and the fast-step margins f -+ displacement; all >= 0 in a quiet step
+        lo, hi = self.bounds
+        disp = mpos - p0
+        guard = np.concatenate([mpos, -mpos, -disp, disp], axis=1)
+        guard[zc + 2 * nd] += np.concatenate([-np.tile(lo, n), np.tile(hi, n), np.full(2 * nd, self._fast)])
+        # every agent's and every leader's [p_i, 1], for the per-episode wall and ray maps
+        aug = np.concatenate([mpos.reshape(z, n, d), np.repeat(one[:, None, :], n, axis=1)], axis=2)
+        blocks += [("vel", mvel), ("guard", guard), ("ref", mref), ("obs", mobs)]
+        blocks += [("paug", aug.reshape(z, -1)), ("laug", aug[:, self.leaders].reshape(z, -1))]
+        cols: dict[str, slice] = {}
+        c = 0
+        for name, blk in blocks:
+            cols[name] = slice(c, c + blk.shape[1])
+            c += blk.shape[1]
+        cols["pos1"] = slice(cols["pos"].start, cols["one"].stop)
+        g0 = cols["guard"].start
+        cols["box"], cols["speed"] = slice(g0, g0 + 2 * nd), slice(g0 + 2 * nd, g0 + 4 * nd)
+        self._falses: dict[int, NDArray[np.bool_]] = {}
+        self._cols = cols
+        self._M = np.ascontiguousarray(np.concatenate([blk for _, blk in blocks], axis=1))
+
+    def _build_geometry_template(self) -> None:
+        """The geometric features: Q = [pos, 1] (B, n d + 1) @ G (shared) + per-episode offsets.
+
+        Rows of Q (each a d-vector whose norm matters): agent pairs p_i - p_j; agent-circle p_i - c_j;
+        agent-wall (excess along the wall, distance across it) (2D, filled in by ``_features``);
+        goal deltas x_i* - p_i (leaders first); affine residual rows / sqrt(n). ``_group`` sums the
+        squares per row (all residual rows into one): [contact distances, goal distances, formation error].
+        Walls and rays have per-episode coefficients, applied per agent to [p_i, 1] (see ``_episode_geometry``).
+        """
+        n, d = self.n, self.d
+        nd = n * d
+        P, C, S = len(self._pairs), self.n_circ, self.n_seg
+        rows = {"pairs": P, "circles": n * C, "walls": n * S, "delta": n, "res": n}
+        r0: dict[str, int] = {}
+        acc = 0
+        for name, size in rows.items():
+            r0[name] = acc
+            acc += size
+        self._rows = r0
+        kc, kd = r0["delta"], r0["res"]
+        self._kc, self._kd = kc, kd
+        nrow = acc
+        self._g = {
+            "walls": slice(r0["walls"] * d, r0["delta"] * d),
+            "delta": slice(r0["delta"] * d, r0["res"] * d),
+            "circles": slice(r0["circles"] * d, r0["walls"] * d),
+        }
+        G0 = np.zeros((nd + 1, nrow * d))
+        comp = np.arange(d)
+        for k, (i, j) in enumerate(self._pairs):
+            G0[i * d + comp, k * d + comp] = 1.0
+            G0[j * d + comp, k * d + comp] = -1.0
+        for i in range(n):
+            for jj in range(C):
+                G0[i * d + comp, (r0["circles"] + i * C + jj) * d + comp] = 1.0
+        for k, a in enumerate(self._perm):
+            G0[a * d + comp, (r0["delta"] + k) * d + comp] = -1.0
+        pres = self.affine._resid / math.sqrt(n)
+        for i in range(n):
+            for j in range(n):
+                G0[j * d + comp, (r0["res"] + i) * d + comp] = pres[i, j]
+        self._G0 = G0
+        group = np.zeros((nrow * d, kd + 1))
+        group[np.arange(kd * d), np.repeat(np.arange(kd), d)] = 1.0
+        group[kd * d :, kd] = 1.0
+        self._group = group
+        sc = self.scenario
+        self._thr0 = np.concatenate(
+            [
+                np.full(P, 2 * self.agent_radius),
+                np.full(n * (C + S), self.agent_radius),
+                np.full(n, sc.goal_tol),
+                [sc.formation_tol],
+            ]
+        )
+
+    def _episode_geometry(self, params: dict[str, Array], ref: Array) -> None:
+        """Per-episode geometry into ``params``: ``_off`` (B, F) offsets of Q (circle centres, static goals),
+        ``_thr`` (B, Kc + n + 1) thresholds, and for walls ``_W`` (B, d + 1, 3 S): [p, 1] -> [across,
+        along - length, -along] per wall, ``_R`` (B, d + 1, 2 R S): a leader's [p, 1] -> [T, AH] per wall and
+        ray (T = range along the ray / sensor range; the ray hits inside the wall iff T >= 0 and |AH| <= 1)."""
+        n, d = self.n, self.d
+        seg, circ = params["segments"], params["circles"]
+        B, S, C = seg.shape[0], self.n_seg, self.n_circ
+        if seg.shape[1] != S or circ.shape[1] != C:
+            raise FormationError(
+                f"scenario {self.scenario_name!r} must give {S} segments and {C} circles per episode, "
+                f"got {seg.shape[1]} and {circ.shape[1]}"
+            )
+        off = np.zeros((B, self._G0.shape[1]))
+        thr = np.repeat(self._thr0[None], B, axis=0)
+        r0, g = self._rows, self._g
+        if C:
+            off[:, g["circles"]].reshape(B, n, C, d)[:] = -circ[:, None, :, :d]
+            thr[:, r0["circles"] : r0["walls"]] += np.repeat(circ[:, None, :, d], n, axis=1).reshape(B, n * C)
+        if not self.scenario.moving_goal:  # static goals: x_i* - p_i has a constant part per episode
+            off[:, g["delta"]] = ref[:, self._goal_perm]
+        if S:
+            a = seg[:, :, 0]
+            e = seg[:, :, 1] - seg[:, :, 0]
+            length = np.linalg.norm(e, axis=-1)  # (B, S)
+            t = e / np.maximum(length, 1e-300)[..., None]
+            nr = np.stack([-t[..., 1], t[..., 0]], axis=-1)
+            a_t, a_n = np.sum(a * t, -1), np.sum(a * nr, -1)
+            W = np.zeros((B, d + 1, 3 * S))
+            W[:, :d, :S], W[:, d, :S] = nr.transpose(0, 2, 1), -a_n
+            W[:, :d, S : 2 * S], W[:, d, S : 2 * S] = t.transpose(0, 2, 1), -a_t - length
+            W[:, :d, 2 * S :], W[:, d, 2 * S :] = -t.transpose(0, 2, 1), a_t
+            un = np.einsum("rc,bsc->brs", self._dirs, nr)  # (B, R, S)
+            ut = np.einsum("rc,bsc->brs", self._dirs, t)
+            ok = np.abs(un) > 1e-9
+            inv = np.where(ok, 1.0 / np.where(ok, un, 1.0), 0.0)
+            coef_t = -nr[:, None] * (inv / self.sensor_range)[..., None]  # (B, R, S, d)
+            const_t = np.where(ok, a_n[:, None] * inv / self.sensor_range, -1.0)
+            half = (length / 2)[:, None, :]
+            coef_h = (t[:, None] - nr[:, None] * (ut * inv)[..., None]) / half[..., None]
+            const_h = -np.sum(a[:, None] * coef_h, -1) - 1.0
+            R = self.n_rays
+            Rm = np.zeros((B, d + 1, 2, S, R))  # feature (part, s, r)
+            Rm[:, :d, 0] = coef_t.transpose(0, 3, 2, 1)
+            Rm[:, d, 0] = const_t.transpose(0, 2, 1)
+            Rm[:, :d, 1] = coef_h.transpose(0, 3, 2, 1)
+            Rm[:, d, 1] = const_h.transpose(0, 2, 1)
+            params["_W"], params["_R"] = W, Rm.reshape(B, d + 1, 2 * S * R)
+            params["_a"], params["_e"] = a, e
+        params["_off"], params["_thr"] = off, thr
+
+    def _build_bounds(self) -> None:
+        d, nl, n = self.d, self.n_l, self.n
+        lo_w, hi_w = self.bounds
+        ext = hi_w - lo_w
+        v = self.v_bound
+        emax = float(np.linalg.norm(ext))
+        ks = self.n_rays if d == 2 else self.n_nearest * d
+        lo = [lo_w, np.full(d, -v), np.tile(-ext, nl - 1), -ext, np.full(d, -v), np.full(d * d, -self.theta_clip)]
+        hi = [hi_w, np.full(d, v), np.tile(ext, nl - 1), ext, np.full(d, v), np.full(d * d, self.theta_clip)]
+        lo += [[0.0], [0.0], np.zeros(ks) if d == 2 else -np.ones(ks)]
+        hi += [[1.0], [emax], np.ones(ks)]
+        self.obs_low = np.concatenate(lo).astype(np.float32)
+        self.obs_high = np.concatenate(hi).astype(np.float32)
+        self._lin_lo = self.obs_low[: self.L1].astype(np.float64)
+        self._lin_hi = self.obs_high[: self.L1].astype(np.float64)
+        self._err_hi = float(self.obs_high[self.L1])
+        sc = self.scenario
+        s_lo: list[ArrayLike] = [np.tile(lo_w, n), np.full(n * d, -v), np.tile(lo_w, n), np.full(n * d, -v), [0.0]]
+        s_hi: list[ArrayLike] = [np.tile(hi_w, n), np.full(n * d, v), np.tile(hi_w, n), np.full(n * d, v), [emax]]
+        s_lo += [np.full(d * d, -self.theta_clip), sc.param_low, [0.0]]
+        s_hi += [np.full(d * d, self.theta_clip), sc.param_high, [1.0]]
+        self.state_low = np.concatenate(s_lo).astype(np.float32)
+        self.state_high = np.concatenate(s_hi).astype(np.float32)
+        self._state_lo64 = self.state_low.astype(np.float64)
+        self._state_hi64 = self.state_high.astype(np.float64)
+        self.state_dim = int(self.state_low.size)
+        no_obstacles = (self.n_seg + self.n_circ) == 0
+        self._const_sense = (np.ones(ks) if d == 2 else np.zeros(ks)) if no_obstacles else None
+        # reward and effort from [success, collision, err, a^2 (n_l p), goal_dist (n_l), goal_dist' (n_l)]
+        w, nlp = self.reward_weights, nl * self.p
+        wr = np.zeros((3 + nlp + 2 * nl, 2 * nl))
+        wr[0, :nl] = w["success"]
+        wr[1, :nl] = -w["collision"]
+        wr[2, :nl] = -w["formation"] * self.dt
+        lead = np.repeat(np.arange(nl), self.p)
+        wr[3 + np.arange(nlp), lead] = -w["effort"] * self.dt / self.p
+        wr[3 + np.arange(nlp), nl + lead] = self.u_max**2
+        wr[3 + nlp + np.arange(nl), np.arange(nl)] = w["progress"]
+        wr[3 + nlp + nl + np.arange(nl), np.arange(nl)] = -w["progress"] - w["distance"] * self.dt
+        self._w_rew = wr
+
+    # ------------------------------------------------------------------ reset
+    def reset(self, rng: np.random.Generator, B: int = 1) -> EngineState:
+        """Draw B new episodes from ``rng``: agents at rest on the scenario's start, law memory empty."""
+        if int(B) != B or B < 1:
+            raise FormationError(f"batch size B must be a positive integer, got {B}")
+        return self._reset_from(dict(self.scenario.reset(rng, int(B))))
+
+    def reset_each(self, rngs: list[np.random.Generator]) -> EngineState:
+        """One new episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` up to rounding (for
+        vectorised envs whose copies are seeded one by one). The scenario draws run per generator, the rest
+        batched."""
+        if not rngs:
+            raise FormationError("reset_each needs at least one generator")
+        draws = [self.scenario.reset(g, 1) for g in rngs]
+        return self._reset_from({key: np.concatenate([dr[key] for dr in draws]) for key in draws[0]})
+
+    def _reset_from(self, params: dict[str, Array]) -> EngineState:
+        B = int(params["segments"].shape[0])
+        start = np.array(params.pop("start"), dtype=np.float64)
+        k = np.zeros(B, dtype=np.int64)
+        ref = self._ref(params, k)
+        self._episode_geometry(params, ref)
+        for arr in params.values():
+            arr.setflags(write=False)
+        geo = self._features(*self._aug(start), params, ref)
+        nv = self._norms(geo)
+        return EngineState(
+            x=self.dynamics.state_from_position(start),
+            pos=start,
+            vel=np.zeros_like(start),
+            memory=self.law.initial_memory((B,)),
+            k=k,
+            ref=ref,
+            goal_dist=nv[:, self._kc : self._kc + self.n_l],
+            err=nv[:, -1],
+            streak=np.zeros(B, dtype=np.int64),
+            params=params,
+        )
+
+    def _ref(self, params: dict[str, Array], k: NDArray[np.int64]) -> Array:
+        """ref = [goal x*(k T), its velocity (x*((k+1) T) - x*(k T)) / T, 1, k], shape (B, 2 n d + 2)."""
+        sc = self.scenario
+        B = k.shape[0]
+        if sc.moving_goal:
+            t = k.astype(np.float64) * self.dt
+            g0 = affine_batch(sc.r, *sc.reference(params, t))
+            gv = (affine_batch(sc.r, *sc.reference(params, t + self.dt)) - g0) / self.dt
+        else:
+            g0 = affine_batch(sc.r, params["goal_theta"], params["goal_b"])
+            gv = np.zeros_like(g0)
+        return np.concatenate([g0.reshape(B, -1), gv.reshape(B, -1), np.ones((B, 1)), k[:, None]], axis=1)
+
+    # ------------------------------------------------------------------ features
+    def _false(self, B: int) -> NDArray[np.bool_]:
+        """A read-only all-False (B,) array (cached)."""
+        f = self._falses.get(B)
+        if f is None:
+            f = self._falses[B] = np.zeros(B, dtype=bool)
+            f.setflags(write=False)
+        return f
+
+    def _aug(self, pos: Array) -> tuple[Array, Array, Array]:
+        """[pos, 1] (B, n d + 1), per-agent [p_i, 1] (B, n, d + 1), per-leader [p_l, 1] (B, n_l, d + 1)."""
+        B = pos.shape[0]
+        paug = np.concatenate([pos, np.ones((B, self.n, 1))], axis=2)
+        pos1 = np.concatenate([pos.reshape(B, -1), np.ones((B, 1))], axis=1)
+        return pos1, paug, paug[:, self.leaders]
+
+    def _features(self, pos1: Array, paug: Array, laug: Array, params: dict[str, Array], ref: Array) -> Array:
+        """Q features (B, F) from the augmented positions of ``_aug`` (see the template); ``laug`` is unused."""
+        q = pos1 @ self._G0
+        q += params["_off"]
+        if self.scenario.moving_goal:
+            q[:, self._g["delta"]] += ref[:, self._goal_perm]
+        S = self.n_seg
+        if S:
+            B = q.shape[0]
+            wf = paug @ params["_W"]  # (B, n, 3 S): across, along - length, -along
+            qw = q[:, self._g["walls"]].reshape(B, self.n, S, self.d)
+            qw[..., 1] = wf[..., :S]
+            ex = qw[..., 0]  # excess along the wall: max(along - length, -along, 0)
+            np.maximum(wf[..., S : 2 * S], wf[..., 2 * S :], out=ex)
+            np.maximum(ex, 0.0, out=ex)
+        return q
+
+    @property
+    def _goal_perm(self) -> NDArray[np.int64]:
+        gp = getattr(self, "_goal_perm_cache", None)
+        if gp is None:
+            d = self.d
+            gp = self._goal_perm_cache = (self._perm[:, None] * d + np.arange(d)).reshape(-1)
+        return gp
+
+    def _norms(self, geo: Array) -> Array:
+        """[contact distances (Kc), goal distances (n, leaders first), formation error], shape (B, Kc + n + 1)."""
+        q = geo
+        return np.sqrt((q * q) @ self._group)
+
+    def _sense(self, laug: Array, params: dict[str, Array]) -> Array:
+        """Obstacle sensing of every leader from its [p, 1] (B, n_l, d + 1): 2D ray ranges / range, 3D
+        proximity vectors; shape (B, n_l, ks)."""
+        if self._const_sense is not None:
+            return self._const_sense
+        B, nl = laug.shape[0], self.n_l
+        pos_l = laug[..., :-1]
+        if self.d == 2:
+            R, S = self.n_rays, self.n_seg
+            if S:  # ranges / sensor range of the rays that hit a wall inside it, else 1
+                rf = laug @ params["_R"]  # (B, n_l, 2 S R): T then AH
+                t, h = rf[..., : S * R], rf[..., S * R :]
+                hit = np.where((t >= 0.0) & (np.abs(h) <= 1.0), t, 1.0).reshape(B, nl, S, R)
+                ranges = np.minimum(hit[:, :, 0], 1.0)
+                for s_ in range(1, S):
+                    np.minimum(ranges, hit[:, :, s_], out=ranges)
+            else:
+                ranges = np.ones((B, nl, R))
+            if self.n_circ:
+                empty = np.zeros((B, 0, 2))
+                rc = geometry.ray_ranges(pos_l, self._dirs, empty, empty, params["circles"], self.sensor_range)
+                np.minimum(ranges, rc * (1.0 / self.sensor_range), out=ranges)
+            return ranges
+        vec = geometry.nearest_obstacle_vectors(pos_l, params["circles"], self.n_nearest, self.sensor_range)
+        return vec.reshape(B, nl, -1)
+
+    def _assemble(self, lin: Array, err: Array, sense: Array) -> NDArray[np.float32]:
+        """Observations from the linear entries (B, n_l L1), the formation error (B,) and sensing (within bounds)."""
+        B, L1 = lin.shape[0], self.L1
+        obs = np.empty((B, self.n_l, self.obs_dim), dtype=np.float32)
+        head = obs[:, :, :L1]  # clipped in float64, then rounded: the float32 bounds are never crossed
+        np.minimum(np.maximum(lin.reshape(B, self.n_l, L1), self._lin_lo), self._lin_hi, out=head, casting="same_kind")
+        obs[:, :, L1] = np.minimum(err, self._err_hi)[:, None]
+        obs[:, :, L1 + 1 :] = sense
+        return obs
+
+    # ------------------------------------------------------------------ observation
+    def observe(self, state: EngineState) -> NDArray[np.float32]:
+        """Observations of every leader, shape (B, n_l, obs_dim), float32 (layout: ``obs_blocks``)."""
+        B = state.batch_size
+        pos1, paug, laug = self._aug(state.pos)
+        geo = self._features(pos1, paug, laug, state.params, state.ref)
+        lin = np.concatenate([state.pos.reshape(B, -1), state.vel.reshape(B, -1), state.ref], axis=1) @ self._w_obs
+        return self._assemble(lin, self._norms(geo)[:, -1], self._sense(laug, state.params))
+
+    def global_state(self, state: EngineState) -> NDArray[np.float32]:
+        """Global state vectors, shape (B, state_dim), float32: positions, velocities, goal positions and
+        velocities of all agents, formation error, fitted Theta (row-major), scenario parameters, time fraction."""
+        B = state.batch_size
+        theta = self.affine.fit(state.pos)[0].reshape(B, -1)
+        nd2 = 2 * self.n * self.d
+        parts = [
+            state.pos.reshape(B, -1),
+            state.vel.reshape(B, -1),
+            state.ref[:, :nd2],
+            state.err[:, None],
+            theta,
+            self.scenario.param_vector(state.params),
+            (state.k / self._max_cycles)[:, None],
+        ]
+        out = np.concatenate(parts, axis=1)
+        np.clip(out, self._state_lo64, self._state_hi64, out=out)
+        return out.astype(np.float32)
+
+    # ------------------------------------------------------------------ step
+    def check_actions(self, actions: ArrayLike, B: int) -> Array:
+        """Actions as float64 (B, n_l, p); raise ValueError naming the leader on NaN or inf."""
+        a = np.asarray(actions, dtype=np.float64)
+        if a.shape != (B, self.n_l, self.p):
+            raise ControlDimension(f"actions must have shape (B, n_l, p) = ({B}, {self.n_l}, {self.p}), got {a.shape}")
+        if not math.isfinite(a.sum()):
+            bad = np.argwhere(~np.isfinite(a).all(axis=-1))
+            if bad.size:  # (a finite sum that overflowed is no error: the values are clipped)
+                b, i = bad[0]
+                raise ValueError(
+                    f"action of leader_{i} (batch entry {b}) holds NaN or inf: {a[b, i].tolist()}; "
+                    "the state is unchanged"
+                )
+        return a
+
+    def step(
+        self, state: EngineState, actions: ArrayLike
+    ) -> tuple[EngineState, NDArray[np.float32], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
+        """One sample of every environment.
+
+        Args:
+            state: the current state (not modified).
+            actions: leader actions in [-1, 1], shape (B, n_l, p); values outside are clipped,
+                NaN or inf raise ValueError (and nothing changes).
+        Returns:
+            (state', obs (B, n_l, obs_dim) float32, rewards (B, n_l), terminated (B,), truncated (B,), info)
+            with info arrays: success, collision, out_of_bounds (B,) bool; formation_error, min_clearance,
+            goal_distance, time (B,) in m and s; control_effort (B, n_l), |u_i|^2.
+        """
+        B = state.x.shape[0]
+        a = np.minimum(np.maximum(self.check_actions(actions, B), -1.0), 1.0)
+        af = a.reshape(B, -1)
+        if state.memory is None:
+            z = np.concatenate((state.x.reshape(B, -1), af, state.ref), axis=1)
+        else:
+            z = np.concatenate((state.x.reshape(B, -1), af, state.memory.reshape(B, -1), state.ref), axis=1)
+        out = z @ self._M
+        cols, params, nl, kc = self._cols, state.params, self.n_l, self._kc
+        k = state.k + 1
+        sc = self.scenario
+        if sc.moving_goal:
+            ref = self._ref(params, k)  # replaces the folded ref' = ref + (0, .., 0, 1) in the observation
+            lin = out[:, cols["obs"]] + (ref - out[:, cols["ref"]]) @ self._w_obs[-ref.shape[1] :]
+        else:
+            ref = out[:, cols["ref"]]
+            lin = out[:, cols["obs"]]
+        laug = out[:, cols["laug"]].reshape(B, self.n_l, self.d + 1)
+        paug = out[:, cols["paug"]].reshape(B, self.n, self.d + 1)
+        geo = self._features(out[:, cols["pos1"]], paug, laug, params, ref)
+        nv = self._norms(geo)
+        v = nv - params["_thr"]
+        clear = v[:, :kc].min(axis=1)
+        collision = clear < 0.0
+        pos = out[:, cols["pos"]].reshape(B, self.n, self.d)
+        if out[:, cols["guard"]].min() >= 0.0:  # the usual step: inside the world box, no agent fast
+            oob = self._false(B)
+        else:
+            oob = out[:, cols["box"]].min(axis=1) < 0.0
+            collision |= oob
+        if (self.n_seg or self.n_circ) and out[:, cols["speed"]].min() < 0.0:
+            prev = state.pos
+            if self.n_seg:
+                collision |= geometry.segment_crossings(prev, pos, params["_a"], params["_e"]).any(axis=1)
+            if self.n_circ:
+                cc = geometry.circle_clearance(prev, pos, params["circles"]).min(axis=(1, 2)) - self.agent_radius
+                np.minimum(clear, cc, out=clear)
+                collision |= cc < 0.0
+        err = nv[:, -1]
+        gd_l = nv[:, kc : kc + nl]
+        if self._fused_success:
+            ok = (v[:, kc:].max(axis=1) < 0.0) > collision
+        else:
+            ok = sc.is_success(nv[:, kc:-1].max(axis=1), err) > collision
+        if sc.hold_steps == 1:
+            streak, success = ok.astype(np.int64), ok
+        else:
+            streak = (state.streak + 1) * ok
+            success = streak >= sc.hold_steps
+        terminated = collision | success if sc.terminate_on_success else collision
+        truncated = (k >= self._max_cycles) > terminated
+        feats = np.concatenate((success[:, None], collision[:, None], err[:, None], af * af, state.goal_dist, gd_l), 1)
+        re = feats @ self._w_rew
+        sense = self._const_sense if self._const_sense is not None else self._sense(laug, params)
+        obs = self._assemble(lin, err, sense)
+        new = EngineState(
+            out[:, cols["x"]].reshape(B, self.n, self.q),
+            pos,
+            out[:, cols["vel"]].reshape(B, self.n, self.d),
+            out[:, cols["mem"]].reshape(B, self.n_f, self.p) if self.mem_dim else None,
+            k,
+            ref,
+            gd_l,
+            err,
+            streak,
+            params,
+        )
+        info = {
+            "success": success,
+            "collision": collision,
+            "out_of_bounds": oob,
+            "formation_error": err,
+            "min_clearance": clear,
+            "goal_distance": None,
+            "control_effort": re[:, nl:],
+            "time": k * self.dt,
+        }
+        info["goal_distance"] = nv[:, kc:-1].max(axis=1)
+        return new, obs, re[:, :nl], terminated, truncated, info
+
+    # ------------------------------------------------------------------ helpers
+    def affine_targets(self, state: EngineState) -> Array:
+        """Where the law drives every agent: leaders where they are, followers at L x_l (Lemma 2), (B, n, d)."""
+        out = state.pos.copy()
+        out[:, self.followers] = np.einsum("fl,bld->bfd", self.law.part.localisation, state.pos[:, self.leaders])
+        return out
+
+    def frame(self, state: EngineState, b: int = 0, trail: Array | None = None, text: str = "") -> dict[str, Any]:
+        """The renderer's frame dict for batch entry ``b`` (keys: ``rendering.FRAME_KEYS``)."""
+        t = float(state.k[b] * self.dt)
+        gd = float(np.max(np.linalg.norm(state.goal[b] - state.pos[b], axis=-1)))
+        status = text or f"{self.scenario_name}  t={t:.1f} s  formation error {state.err[b]:.3f} m  goal {gd:.2f} m"
+        return {
+            "positions": state.pos[b],
+            "leaders": self.leaders,
+            "edges": self.fw.edge_array(),
+            "targets": self.affine_targets(state)[b],
+            "obstacles": {"segments": state.params["segments"][b], "circles": state.params["circles"][b]},
+            "goal": state.goal[b],
+            "trail": np.zeros((0, self.n, self.d)) if trail is None else trail,
+            "bounds": self.bounds,
+            "agent_radius": self.agent_radius,
+            "text": status,
+            "time": t,
+        }
+
+    @staticmethod
+    def concat(states: list[EngineState]) -> EngineState:
+        """Join states along the batch dim (e.g. B = 1 resets into one batch), in order."""
+        first = states[0]
+        params = {kk: np.concatenate([s.params[kk] for s in states]) for kk in first.params}
+        for arr in params.values():
+            arr.setflags(write=False)
+
+        def cat(name: str) -> Any:
+            return None if getattr(first, name) is None else np.concatenate([getattr(s, name) for s in states])
+
+        return EngineState(
+            cat("x"),
+            cat("pos"),
+            cat("vel"),
+            cat("memory"),
+            cat("k"),
+            cat("ref"),
+            cat("goal_dist"),
+            cat("err"),
+            cat("streak"),
+            params,
+        )
+
+    def select(self, state: EngineState, index: ArrayLike) -> EngineState:
+        """The sub-batch ``index`` of ``state`` (for tests and vectorised resets)."""
+        idx = np.atleast_1d(np.asarray(index))
+        return EngineState(
+            state.x[idx],
+            state.pos[idx],
+            state.vel[idx],
+            None if state.memory is None else state.memory[idx],
+            state.k[idx],
+            state.ref[idx],
+            state.goal_dist[idx],
+            state.err[idx],
+            state.streak[idx],
+            {kk: vv[idx] for kk, vv in state.params.items()},
+        )

@@ -1,0 +1,270 @@
+"""The PettingZoo parallel env: the batched engine at B = 1, leaders as agents, followers inside."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import EzPickle
+from numpy.typing import NDArray
+from pettingzoo import ParallelEnv
+
+from formation_env.core.errors import FormationError
+
+from .engine import Engine, EngineState
+
+__all__ = ["FormationEnv"]
+
+_INFO_SCALARS = ("success", "collision", "out_of_bounds", "formation_error", "min_clearance", "goal_distance", "time")
+
+
+class FormationEnv(ParallelEnv, EzPickle):
+    """Leader-follower affine formation control (Zhao & Zelazo's stress-matrix laws, sampled in discrete time).
+
+    ## Description
+
+    n agents in R^d (d = 2 or 3) form an affine image x_i* = Theta r_i + b of a nominal
+    configuration r (paper eq. 7). Only the n_l leaders are agents of this env; the n_f
+    followers run an analytic sampled-data law on the stress matrix Omega inside the step
+    (``follower_law``: ``stationary`` eq. 17, ``dynamic`` eq. 21 solved exactly,
+    ``dynamic_distributed`` with m Jacobi rounds, ``linear`` with the Riccati gain of Theorem 3).
+    By moving, the leaders steer the whole formation through translation, rotation, scaling
+    and shear (the affine image), e.g. shrinking it to pass a gap. Scenarios (``scenario``):
+    ``hold``, ``maneuver``, ``maneuver_3d``, ``narrow_passage``, ``obstacle_field``
+    (``formation_env.env.scenarios``; each file's docstring gives its geometry and success test).
+
+    ## Action Space
+
+    ``Box(-1, 1, (p,), float32)`` per leader, p = the input dimension (d for single and double
+    integrators). The action is scaled by ``u_max``: a velocity (m/s, single integrator) or an
+    acceleration (m/s^2, double integrator) per axis. Out-of-range actions are clipped to [-1, 1];
+    an action holding NaN or inf raises ``ValueError`` naming the agent and leaves the env unchanged.
+    Every leader's input also feeds the follower law as u_leaders (the dynamic laws use it).
+
+    ## Observation Space
+
+    ``Box(low, high, (obs_dim,), float32)``, the same for every leader, in world axes and SI units;
+    every entry is clipped to its (finite) bounds. For the 2D default framework (3 leaders,
+    16 rays) obs_dim = 34. W = world box (``bounds``), E = its extent, v = ``max_speed``:
+
+    | entries            | size           | meaning                                                 | bounds      |
+    |--------------------|----------------|---------------------------------------------------------|-------------|
+    | position           | d              | own position p_i (m)                                    | W           |
+    | velocity           | d              | own velocity (m/s)                                      | +-v         |
+    | other_leaders      | (n_l - 1) d    | p_j - p_i for the other leaders, in leader order (m)    | +-E         |
+    | goal               | d              | own goal (reference) position minus p_i (m)             | +-E         |
+    | goal_velocity      | d              | velocity of the own goal position (m/s; 0 if static)    | +-v         |
+    | theta              | d^2            | Theta of the least-squares affine fit of all agents     | +-3         |
+    | time               | 1              | k / max_cycles                                          | [0, 1]      |
+    | formation_error    | 1              | RMS distance of all agents from their affine fit (m)   | [0, \\|E\\|] |
+    | obstacles (2D)     | n_rays         | range to the first wall/circle along fixed world rays  | [0, 1]      |
+    |                    |                | at angles 2 pi j / n_rays, divided by ``sensor_range`` |             |
+    | obstacles (3D)     | n_nearest d    | per nearest obstacle: unit direction times              | [-1, 1]     |
+    |                    |                | (1 - surface distance / ``sensor_range``)^+            |             |
+
+    ``obs_blocks`` maps these names to slices. ``state()`` (``state_space``) is the global vector:
+    positions, velocities, goal positions and goal velocities of all n agents, formation error,
+    fitted Theta, the scenario's parameters, time fraction.
+
+    ## Rewards
+
+    Per leader i at each step (weights ``reward_weights``, defaults per scenario; T = dt):
+
+        r_i = w_progress (g_i(k) - g_i(k+1)) - w_distance T g_i(k+1) - w_formation T e(k+1)
+              - w_effort T |a_i|^2 / p - w_collision c(k+1) + w_success s(k+1)
+
+    g_i: distance (m) of leader i to its goal position; e: affine-image formation error (m);
+    a_i: the clipped action; c: 1 on a collision (agent-agent, wall, obstacle, leaving the
+    world box), s: 1 on success. Defaults: progress 1, distance 0, formation 1, effort 0.01,
+    collision 10, success 10; ``maneuver`` uses distance 1, progress 0, success 0; ``hold``
+    adds distance 0.1.
+
+    ## Starting State
+
+    Drawn by the scenario from the env's ``np.random.Generator`` (reseeded by ``reset(seed=...)``):
+    leaders on a start pose at rest, followers near their targets.
+
+    ## Episode End
+
+    Terminated (all agents) on a collision or on success (all agents within ``goal_tol`` of their
+    goal positions and formation error below ``formation_tol`` for ``hold_steps`` samples;
+    ``maneuver`` does not end on success). Truncated after ``max_cycles`` steps.
+
+    ## Arguments
+
+    ``formation_v0.parallel_env(scenario="narrow_passage", dynamics="double_integrator",
+    follower_law="dynamic", dt=0.1, max_cycles=400, render_mode=None, **kwargs)`` with keyword
+    arguments ``framework`` (name or ``Framework``), ``omega``, ``law_params``, ``u_max`` (1.0),
+    ``agent_radius`` (0.1 m), ``n_rays`` (16), ``n_nearest`` (2), ``sensor_range`` (3 m),
+    ``max_speed`` (3 m/s), ``reward_weights``, and the scenario's own (e.g. ``gap_width``);
+    unknown ones raise TypeError. ``stationary`` is offered with single integrators only.
+
+    Info per agent per step (a fresh dict): ``success``, ``collision``, ``out_of_bounds`` (bool),
+    ``formation_error``, ``min_clearance`` (m; smallest agent-agent or agent-obstacle gap between
+    surfaces), ``goal_distance`` (m; largest agent distance to its goal position), ``time`` (s),
+    ``control_effort`` (|u_i|^2 of this leader's applied input).
+
+    ## Version History
+
+    * v0: initial version.
+    """
+
+    metadata: dict[str, Any] = {
+        "name": "formation_v0",
+        "render_modes": ["human", "rgb_array"],
+        "render_fps": 10,
+        "is_parallelizable": True,
+    }
+
+    def __init__(
+        self,
+        scenario: str = "narrow_passage",
+        dynamics: Any = "double_integrator",
+        follower_law: str = "dynamic",
+        dt: float = 0.1,
+        max_cycles: int = 400,
+        render_mode: str | None = None,
+        **kwargs: Any,
+    ) -> None:
+        EzPickle.__init__(
+            self,
+            scenario=scenario,
+            dynamics=dynamics,
+            follower_law=follower_law,
+            dt=dt,
+            max_cycles=max_cycles,
+            render_mode=render_mode,
+            **kwargs,
+        )
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise FormationError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+        self.engine = Engine(scenario, dynamics, follower_law, dt, max_cycles, **kwargs)
+        eng = self.engine
+        self.render_mode = render_mode
+        self.possible_agents = [f"leader_{i}" for i in range(eng.n_l)]
+        self.agents: list[str] = []
+        self._index = list(enumerate(self.possible_agents))
+        self._obs_space = spaces.Box(eng.obs_low, eng.obs_high, dtype=np.float32)
+        self._act_space = spaces.Box(-1.0, 1.0, (eng.p,), dtype=np.float32)
+        self.observation_spaces = dict.fromkeys(self.possible_agents, self._obs_space)
+        self.action_spaces = dict.fromkeys(self.possible_agents, self._act_space)
+        self.state_space = spaces.Box(eng.state_low, eng.state_high, dtype=np.float32)
+        self.obs_blocks = eng.obs_blocks
+        self._rng: np.random.Generator | None = None
+        self._state: EngineState | None = None
+        self._renderer: Any = None
+        self._trail: list[NDArray[np.float64]] = []
+        self.trail_length = 60
+
+    # ------------------------------------------------------------------ spaces
+    def observation_space(self, agent: str) -> spaces.Box:
+        """The (shared) observation space; the same object on every call."""
+        return self._obs_space
+
+    def action_space(self, agent: str) -> spaces.Box:
+        """The (shared) action space; the same object on every call."""
+        return self._act_space
+
+    @property
+    def max_cycles(self) -> int:
+        """Steps per episode before truncation."""
+        return self.engine.max_cycles
+
+    @max_cycles.setter
+    def max_cycles(self, value: int) -> None:
+        self.engine.max_cycles = value
+
+    @property
+    def engine_state(self) -> EngineState | None:
+        """The current batched engine state (B = 1), or None before ``reset``."""
+        return self._state
+
+    # ------------------------------------------------------------------ API
+    def reset(
+        self, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[dict[str, NDArray[np.float32]], dict[str, dict[str, Any]]]:
+        """Start an episode; ``seed`` reseeds the env's generator (``options`` is accepted and unused)."""
+        if seed is not None or self._rng is None:
+            self._rng = np.random.default_rng(seed)
+        self._state = self.engine.reset(self._rng, 1)
+        self.agents = self.possible_agents[:]
+        obs = self.engine.observe(self._state)[0]
+        self._trail = [self._state.pos[0]]
+        if self.render_mode == "human":
+            self.render()
+        return {a: obs[i] for i, a in self._index}, {a: {} for a in self.agents}
+
+    def step(
+        self, actions: dict[str, Any]
+    ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
+        """Advance one sample with every live leader's action (see the class docstring)."""
+        if not self.agents:
+            if actions:
+                raise FormationError("the episode is over: call reset() before step()")
+            return {}, {}, {}, {}, {}
+        try:
+            a = np.array([actions[ag] for ag in self.possible_agents], dtype=np.float64)
+        except KeyError as exc:
+            raise ValueError(f"step() needs an action for every live agent; missing {exc.args[0]!r}") from None
+        except ValueError as exc:
+            raise ValueError(f"actions must be arrays of shape {self._act_space.shape}: {exc}") from None
+        if a.shape != (self.engine.n_l, self.engine.p):
+            raise ValueError(f"each action must have shape {self._act_space.shape}, got actions of shape {a.shape[1:]}")
+        state, obs, rew, term, trunc, info = self.engine.step(self._state, a[None])  # type: ignore[arg-type]
+        self._state = state
+        o = obs[0]
+        agents = self.possible_agents
+        t, tr = bool(term[0]), bool(trunc[0])
+        common = {key: info[key].tolist()[0] for key in _INFO_SCALARS}
+        effort = info["control_effort"][0].tolist()
+        infos = {ag: {**common, "control_effort": effort[i]} for i, ag in self._index}
+        out = (
+            {ag: o[i] for i, ag in self._index},
+            dict(zip(agents, rew[0].tolist(), strict=True)),
+            dict.fromkeys(agents, t),
+            dict.fromkeys(agents, tr),
+            infos,
+        )
+        if t or tr:
+            self.agents = []
+        if self.render_mode is not None:
+            self._trail.append(state.pos[0])
+            del self._trail[: -self.trail_length]
+            if self.render_mode == "human":
+                self.render()
+        return out
+
+    def state(self) -> NDArray[np.float32]:
+        """The global state vector (``state_space``)."""
+        if self._state is None:
+            raise FormationError("call reset() before state()")
+        return self.engine.global_state(self._state)[0]
+
+    # ------------------------------------------------------------------ rendering
+    def render(self) -> NDArray[np.uint8] | None:
+        """Draw the current frame: an (H, W, 3) uint8 array (``rgb_array``), or a window (``human``)."""
+        if self.render_mode is None:
+            import warnings
+
+            warnings.warn("render() called with render_mode=None: nothing to draw", stacklevel=2)
+            return None
+        if self._state is None:
+            raise FormationError("call reset() before render()")
+        if self._renderer is None:
+            from .rendering import Renderer
+
+            self._renderer = Renderer(self.engine.d, self.render_mode, fps=self.metadata["render_fps"])
+        trail = np.stack(self._trail) if self._trail else None
+        return self._renderer.draw(self.engine.frame(self._state, 0, trail))
+
+    def close(self) -> None:
+        """Close the renderer (if one was opened)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def __str__(self) -> str:
+        return "formation_v0"

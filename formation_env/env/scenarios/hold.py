@@ -1,0 +1,83 @@
+"""``hold``: reach a target affine image of the nominal configuration and hold it (2D or 3D).
+
+Per episode (uniform draws from the seed's generator; ranges are keyword arguments):
+
+* World box [-5, 5]^d.
+* Start: Theta0 a rotation (2D angle in [-pi, pi]; 3D a random axis and angle), b0 in [-1, 1]^d;
+  leaders on the start pose at rest, followers there plus up to ``follower_noise`` = 0.3 m.
+* Goal: Theta_g = rotation . shear . diag(scale) with angle in [-pi/2, pi/2], shear of axis 0 by
+  axis 1 in [-0.3, 0.3], each scale factor in [0.6, 1.4]; b_g in [-2, 2]^d.
+
+``start="paper"`` reproduces the paper's simulation (Section 4.3) on its 5-agent framework:
+leaders at r_1..r_3, followers at (-4, 3) and (-3, -2), goal the nominal pose (Theta = I, b = 0).
+
+Success: every agent within ``goal_tol`` = 0.15 m of Theta_g r_i + b_g and the formation error
+below ``formation_tol`` = 0.05 m for ``hold_steps`` = 10 consecutive samples; it terminates the episode.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+
+from formation_env.core.errors import FormationError
+
+from ._base import Array, Scenario, rotation_2d, rotation_3d, uniform
+
+__all__ = ["Hold", "make"]
+
+PAPER_FOLLOWER_START = np.array([[-4.0, 3.0], [-3.0, -2.0]])
+
+
+class Hold(Scenario):
+    """Reach and hold a random affine image of r (see the module docstring)."""
+
+    name: ClassVar[str] = "hold"
+    dims: ClassVar[tuple[int, ...]] = (2, 3)
+    half_size: ClassVar[tuple[float, ...]] = (5.0, 5.0, 5.0)
+    weights: ClassVar[dict[str, float]] = {"distance": 0.1}
+    goal_tol_default: ClassVar[float] = 0.15
+    hold_steps_default: ClassVar[int] = 10
+
+    def _init(self, kw: dict[str, Any]) -> None:
+        self.start = str(kw.pop("start", "random"))
+        if self.start not in ("random", "paper"):
+            raise FormationError(f"hold: start must be 'random' or 'paper', got {self.start!r}")
+        if self.start == "paper" and (self.fw.n, self.d, self.fw.leaders) != (5, 2, (0, 1, 2)):
+            raise FormationError("hold: start='paper' needs the paper's 5-agent framework (framework='paper')")
+        self.start_b = tuple(kw.pop("start_b", (-1.0, 1.0)))
+        self.goal_b = tuple(kw.pop("goal_b", (-2.0, 2.0)))
+        self.goal_angle = tuple(kw.pop("goal_angle", (-np.pi / 2, np.pi / 2)))
+        self.goal_scale = tuple(kw.pop("goal_scale", (0.6, 1.4)))
+        self.goal_shear = tuple(kw.pop("goal_shear", (-0.3, 0.3)))
+        self.follower_noise = float(kw.pop("follower_noise", 0.3))
+
+    def _rotation(self, rng: np.random.Generator, angle: tuple[float, float], B: int) -> Array:
+        a = uniform(rng, angle, B)
+        if self.d == 2:
+            return rotation_2d(a)
+        return rotation_3d(rng.normal(size=(B, 3)), a)
+
+    def reset(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
+        d = self.d
+        th0 = self._rotation(rng, (-np.pi, np.pi), B)
+        b0 = uniform(rng, self.start_b, (B, d))
+        sc = uniform(rng, self.goal_scale, (B, d))
+        sh = np.broadcast_to(np.eye(d), (B, d, d)).copy()
+        sh[:, 0, 1] = uniform(rng, self.goal_shear, B)
+        thg = self._rotation(rng, self.goal_angle, B) @ sh @ (sc[:, :, None] * np.eye(d))
+        bg = uniform(rng, self.goal_b, (B, d))
+        if self.start == "paper":
+            start = np.broadcast_to(self.r, (B, 5, 2)).copy()
+            start[:, 3:] = PAPER_FOLLOWER_START
+            thg = np.broadcast_to(np.eye(2), (B, 2, 2)).copy()
+            bg = np.zeros((B, 2))
+        else:
+            start = self.start_positions(rng, th0, b0, self.follower_noise)
+        return {"start": start, "goal_theta": thg, "goal_b": bg, **self.empty_obstacles(B)}
+
+
+def make(fw: Any, **kwargs: Any) -> Hold:
+    """Build the scenario for framework ``fw`` (keyword arguments: see :class:`Hold`)."""
+    return Hold(fw, **kwargs)

@@ -1,0 +1,106 @@
+"""``maneuver``: track a time-varying affine image Theta(t) r + b(t) (2D or 3D).
+
+The reference pose (uniform draws per episode; H = max_cycles * dt is the horizon, s):
+
+* Start Theta0 a rotation (2D angle in [-pi, pi]; 3D random axis and angle), b0 in [-1, 1]^d.
+* Theta(t) = Sh(t) S(t) R(t) Theta0 and b(t) = b0 + ramp(t) offset, where each factor moves
+  from I to its final value along a smoothstep ramp over its window:
+  translation ``offset`` (random direction, length in [2, 5] m) over [0.05 H, 0.95 H];
+  rotation R by an angle of magnitude in [pi/4, pi/2] (random sign; 3D about a random axis)
+  over [0.1 H, 0.4 H]; scaling S = diag(f), each f in [0.6, 1.4], over [0.35 H, 0.65 H];
+  shear Sh = I + h e_0 e_1^T, h in [-0.5, 0.5], over [0.6 H, 0.9 H].
+  This is ``translate(offset) @ hold(b=b0) @ shear(h) @ scale(f) @ rotate(angle) @ hold(Theta0)``
+  of :mod:`formation_env.core.affine`, batched.
+* World box [-10, 10]^d. Agents start on the reference at t = 0 (followers with 0.05 m noise).
+
+The analytic answer is known: the leaders command exactly x_l*((k+1) T) (single integrators:
+u = (x*((k+1) T) - x(k)) / T); with the ``dynamic`` law the followers then track too.
+Observation "goal" entries are the reference x_i*(t) and its velocity (x_i*(t + T) - x_i*(t)) / T.
+
+Reward: ``distance`` (tracking) replaces ``progress``. Success (judged every sample, reported in
+``info``; the episode does not end on it): every agent within ``goal_tol`` = 0.3 m of its
+reference and the formation error below 0.05 m; the last sample's value is the episode's.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ._base import Array, Scenario, rotation_2d, rotation_3d, uniform
+
+__all__ = ["WINDOWS", "Maneuver", "make", "smoothstep"]
+
+#: Ramp windows as fractions of the horizon: translate, rotate, scale, shear.
+WINDOWS: dict[str, tuple[float, float]] = {
+    "translate": (0.05, 0.95),
+    "rotate": (0.1, 0.4),
+    "scale": (0.35, 0.65),
+    "shear": (0.6, 0.9),
+}
+
+
+def smoothstep(t: Array, start: float, stop: float) -> Array:
+    """0 before start, 1 after stop, 3 s^2 - 2 s^3 between (as ``core.affine._ramp``), shape of t."""
+    s = np.clip((t - start) / (stop - start), 0.0, 1.0)
+    return s * s * (3.0 - 2.0 * s)
+
+
+class Maneuver(Scenario):
+    """Track a randomised translate-rotate-scale-shear manoeuvre (see the module docstring)."""
+
+    name: ClassVar[str] = "maneuver"
+    dims: ClassVar[tuple[int, ...]] = (2, 3)
+    moving_goal: ClassVar[bool] = True
+    terminate_on_success: ClassVar[bool] = False
+    half_size: ClassVar[tuple[float, ...]] = (10.0, 10.0, 10.0)
+    weights: ClassVar[dict[str, float]] = {"progress": 0.0, "distance": 1.0, "success": 0.0}
+    goal_tol_default: ClassVar[float] = 0.3
+
+    def _init(self, kw: dict[str, Any]) -> None:
+        self.offset_length = tuple(kw.pop("offset_length", (2.0, 5.0)))
+        self.rotation = tuple(kw.pop("rotation", (np.pi / 4, np.pi / 2)))
+        self.scale = tuple(kw.pop("scale", (0.6, 1.4)))
+        self.shear = tuple(kw.pop("shear", (-0.5, 0.5)))
+        self.start_b = tuple(kw.pop("start_b", (-1.0, 1.0)))
+        self.follower_noise = float(kw.pop("follower_noise", 0.05))
+        self._win = {k: (a * self.horizon, b * self.horizon) for k, (a, b) in WINDOWS.items()}
+
+    def reset(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
+        d = self.d
+        direction = rng.normal(size=(B, d))
+        direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
+        angle0 = uniform(rng, (-np.pi, np.pi), B)
+        params = {
+            "b0": uniform(rng, self.start_b, (B, d)),
+            "offset": direction * uniform(rng, self.offset_length, B)[:, None],
+            "angle": uniform(rng, self.rotation, B) * rng.choice([-1.0, 1.0], size=B),
+            "scale": uniform(rng, self.scale, (B, d)),
+            "shear": uniform(rng, self.shear, B),
+        }
+        if d == 2:
+            params["theta0"] = rotation_2d(angle0)
+        else:
+            params["theta0"] = rotation_3d(rng.normal(size=(B, 3)), angle0)
+            params["axis"] = rng.normal(size=(B, 3))
+        theta, b = self.reference(params, np.zeros(B))
+        params["start"] = self.start_positions(rng, theta, b, self.follower_noise)
+        params.update(self.empty_obstacles(B))
+        return params
+
+    def reference(self, params: dict[str, Array], t: Array) -> tuple[Array, Array]:
+        w = self._win
+        d = self.d
+        a_rot = params["angle"] * smoothstep(t, *w["rotate"])
+        rot = rotation_2d(a_rot) if d == 2 else rotation_3d(params["axis"], a_rot)
+        f = 1.0 + smoothstep(t, *w["scale"])[:, None] * (params["scale"] - 1.0)  # (B, d)
+        theta = f[:, :, None] * (rot @ params["theta0"])  # S R Theta0
+        theta[:, 0, :] += (params["shear"] * smoothstep(t, *w["shear"]))[:, None] * theta[:, 1, :]  # Sh
+        b = params["b0"] + smoothstep(t, *w["translate"])[:, None] * params["offset"]
+        return theta, b
+
+
+def make(fw: Any, **kwargs: Any) -> Maneuver:
+    """Build the scenario for framework ``fw`` (keyword arguments: see :class:`Maneuver`)."""
+    return Maneuver(fw, **kwargs)

@@ -91,6 +91,13 @@ def cmd_rollout(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    """Evaluate a policy (analytic or a saved model) on a seeded suite; metrics with 95 % intervals."""
+    from train.evaluate import run_cli
+
+    return run_cli(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="formation-env", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -112,6 +119,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env-kwargs", default="", help='JSON dict of env arguments, e.g. {"dt": 0.05}')
     p.add_argument("--out", default="out/rollout.gif", help="output .gif or .mp4")
     p.set_defaults(func=cmd_rollout)
+    p = sub.add_parser("evaluate", help="evaluate a policy on a seeded suite (success, collisions, time to goal)")
+    from train.evaluate import add_arguments
+
+    add_arguments(p)
+    p.set_defaults(func=cmd_evaluate)
     p = sub.add_parser("bench", help="run the benchmarks and write BENCHMARKS.md")
     p.add_argument("--only", nargs="*", help="sections (core, design, env)")
     p.add_argument("--quick", action="store_true")

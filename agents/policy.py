@@ -1,0 +1,234 @@
+"""One policy interface for analytic planners and learned (SB3) policies.
+
+Every policy offers
+
+* ``act(observation)``: commander observations (B, obs_dim) float32 -> actions (B, act_dim) in [-1, 1]
+  (act_dim = n_l p, leaders in order). The commander observation is the engine's global state
+  (``Engine.global_state``, shape (B, state_dim)); see :mod:`train.commander`.
+* ``act_engine(engine, state, obs=None)``: actions (B, n_l, p) for a batched engine state, used by the
+  evaluation harness (it runs the pure engine batched).
+* ``act_parallel(obs_dict, env)``: a PettingZoo ``formation_v0`` parallel env's observation dict ->
+  actions dict (what ``formation-env rollout`` calls).
+
+Analytic planners need the engine state: ``act`` decodes it from the global state (positions,
+velocities, goals, time and scenario parameters are all in it), ``act_parallel`` reads
+``env.unwrapped.engine`` and ``env.unwrapped.engine_state``; the interface is identical.
+"""
+
+from __future__ import annotations
+
+import json
+import pickle
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from formation_env.env.engine import Engine, EngineState
+
+from .planner import make_planner
+
+__all__ = ["AnalyticPolicy", "LearnedPolicy", "Policy", "load_policy"]
+
+Array = NDArray[np.float64]
+
+
+def _engine_of(env: Any) -> Engine:
+    if isinstance(env, Engine):
+        return env
+    base = getattr(env, "unwrapped", env)
+    eng = getattr(base, "engine", None)
+    if not isinstance(eng, Engine):
+        raise TypeError(f"expected an Engine or an env with an .engine (formation_v0), got {type(env).__name__}")
+    return eng
+
+
+class Policy:
+    """Base class: subclasses implement :meth:`act_engine`; ``act`` and ``act_parallel`` follow from it."""
+
+    name: str = "policy"
+    engine: Engine
+
+    def act_engine(self, engine: Engine, state: EngineState, obs: Any = None) -> Array:
+        """Actions (B, n_l, p) in [-1, 1] for the batched ``state``."""
+        raise NotImplementedError
+
+    def act(self, observation: NDArray[np.floating]) -> NDArray[np.float32]:
+        """Commander observations (B, state_dim) -> actions (B, n_l p) in [-1, 1], float32."""
+        raise NotImplementedError
+
+    def act_parallel(self, obs_dict: dict[str, Any], env: Any) -> dict[str, NDArray[np.float32]]:
+        """Per-leader actions of a ``formation_v0`` parallel env: {agent: (p,) float32}."""
+        base = getattr(env, "unwrapped", env)
+        state = base.engine_state
+        if state is None:
+            raise RuntimeError("act_parallel needs an env that has been reset")
+        a = self.act_engine(base.engine, state, obs_dict).astype(np.float32)[0]
+        return {agent: a[i] for i, agent in enumerate(base.possible_agents) if agent in obs_dict}
+
+
+def decode_state(engine: Engine, gs: NDArray[np.floating], template: EngineState | None = None) -> EngineState:
+    """An :class:`EngineState` good enough for the planners from global states (B, state_dim).
+
+    Decodes positions, velocities, goals, time and the scenario's parameters (``narrow_passage``:
+    wall_x, gap_center, gap_width; ``obstacle_field``: circles). Values were clipped to the state
+    bounds, so positions outside the world box are not exact (they are collisions anyway).
+    """
+    g = np.asarray(gs, dtype=np.float64)
+    B, n, d = g.shape[0], engine.n, engine.d
+    nd = n * d
+    off = 0
+
+    def take(k: int) -> Array:
+        nonlocal off
+        out = g[:, off : off + k]
+        off += k
+        return out
+
+    pos = take(nd).reshape(B, n, d)
+    vel = take(nd).reshape(B, n, d)
+    goal = take(nd).reshape(B, n, d)
+    goal_vel = take(nd).reshape(B, n, d)
+    err = take(1)[:, 0]
+    take(d * d)
+    pv = take(int(engine.scenario.param_low.size))
+    tfrac = take(1)[:, 0]
+    k = np.rint(tfrac * engine.max_cycles).astype(np.int64)
+    name = engine.scenario_name
+    params: dict[str, Array] = {}
+    # goal pose (static goals): least-squares fit of the goal positions
+    th, b = engine.affine.fit(goal)
+    params["goal_theta"], params["goal_b"] = th, b
+    if name == "narrow_passage":
+        params["wall_x"], params["gap_center"], params["gap_width"] = pv[:, 0], pv[:, 1], pv[:, 2]
+    elif name == "obstacle_field":
+        params["circles"] = pv.reshape(B, -1, d + 1)
+    x = engine.dynamics.state_from_position(pos)
+    if engine.kind == "double_integrator":
+        x = np.concatenate([pos, vel], axis=-1).reshape(B, n, -1)
+    ref = np.concatenate([goal.reshape(B, -1), goal_vel.reshape(B, -1), np.ones((B, 1)), k[:, None]], axis=1)
+    zeros = np.zeros(B)
+    return EngineState(x, pos, vel, None, k, ref, zeros[:, None], err, k * 0, params)
+
+
+class AnalyticPolicy(Policy):
+    """The scenario's analytic planner (:mod:`agents.planner`) behind the policy interface.
+
+    Args:
+        engine: the engine (or a formation_v0 env) it acts in.
+        **params: planner parameters (defaults: the tuned ones).
+    """
+
+    def __init__(self, engine: Engine | Any, **params: Any) -> None:
+        self.engine = _engine_of(engine)
+        self.planner = make_planner(self.engine.scenario_name, **params)
+        self.name = "analytic"
+
+    def act_engine(self, engine: Engine, state: EngineState, obs: Any = None) -> Array:
+        return self.planner(engine, state)
+
+    def act(self, observation: NDArray[np.floating]) -> NDArray[np.float32]:
+        obs = np.atleast_2d(np.asarray(observation))
+        state = decode_state(self.engine, obs)
+        a = self.planner(self.engine, state)
+        return a.reshape(a.shape[0], -1).astype(np.float32)
+
+
+class LearnedPolicy(Policy):
+    """A saved SB3 model with its VecNormalize statistics and config (``<stem>.zip``,
+    ``<stem>_vecnormalize.pkl``, ``<stem>_config.json`` side by side).
+
+    ``config["mode"]``: ``"commander"`` (observation = global state, action = all leaders, (n_l p,))
+    or ``"shared"`` (one policy per leader on its own observation, action (p,)).
+    """
+
+    def __init__(self, model: Any, vecnorm: Any | None, config: dict[str, Any], engine: Engine | None = None) -> None:
+        self.model = model
+        self.vecnorm = vecnorm
+        self.config = config
+        self.mode = str(config.get("mode", "commander"))
+        self.residual = float(config.get("residual", 0.0))
+        self._planner: Any = None
+        self.name = str(config.get("name", f"{config.get('algo', 'learned')}_{self.mode}"))
+        self._engine = engine
+
+    @property
+    def engine(self) -> Engine:  # type: ignore[override]
+        """The engine it acts in (built from the config's scenario and env arguments when not given)."""
+        if self._engine is None:
+            cfg = self.config
+            self._engine = Engine(str(cfg.get("scenario", "narrow_passage")), **cfg.get("env_kwargs", {}))
+        return self._engine
+
+    @staticmethod
+    def paths(path: str | Path) -> tuple[Path, Path, Path]:
+        """(model zip, VecNormalize pickle, config json) for a model path with or without ``.zip``."""
+        p = Path(path)
+        stem = p.with_suffix("") if p.suffix == ".zip" else p
+        return stem.with_suffix(".zip"), Path(f"{stem}_vecnormalize.pkl"), Path(f"{stem}_config.json")
+
+    @classmethod
+    def load(cls, path: str | Path, engine: Engine | Any | None = None) -> LearnedPolicy:
+        """Load the model at ``path`` (.zip) and the statistics and config beside it."""
+        from stable_baselines3 import PPO, SAC
+
+        zp, vp, cp = cls.paths(path)
+        if not zp.exists():
+            raise FileNotFoundError(f"no saved model at {zp}")
+        config = json.loads(cp.read_text()) if cp.exists() else {}
+        algos: dict[str, Any] = {"ppo": PPO, "sac": SAC}
+        algo = algos[str(config.get("algo", "ppo"))]
+        model = algo.load(str(zp), device="cpu")
+        vecnorm = None
+        if vp.exists():
+            with open(vp, "rb") as fh:
+                vecnorm = pickle.load(fh)
+        eng = None if engine is None else _engine_of(engine)
+        return cls(model, vecnorm, config, eng)
+
+    def _norm(self, obs: NDArray[np.floating]) -> NDArray[np.float32]:
+        o = np.asarray(obs, dtype=np.float32)
+        if self.vecnorm is not None and getattr(self.vecnorm, "norm_obs", False):
+            o = np.asarray(self.vecnorm.normalize_obs(o), dtype=np.float32)
+        return o
+
+    def _raw(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
+        a, _ = self.model.predict(self._norm(obs), deterministic=True)
+        return np.clip(np.asarray(a, dtype=np.float32).reshape(obs.shape[0], -1), -1.0, 1.0)
+
+    def _plan(self, engine: Engine, state: EngineState) -> Array:
+        if self._planner is None:
+            self._planner = make_planner(engine.scenario_name)
+        return self._planner(engine, state).reshape(state.batch_size, -1)
+
+    def act(self, observation: NDArray[np.floating]) -> NDArray[np.float32]:
+        obs = np.atleast_2d(np.asarray(observation, dtype=np.float32))
+        a = self._raw(obs)
+        if self.residual > 0:  # correction of the planner, which reads the state decoded from the observation
+            eng = self.engine
+            a = np.clip(self._plan(eng, decode_state(eng, obs)) + self.residual * a, -1.0, 1.0).astype(np.float32)
+        return a
+
+    def act_engine(self, engine: Engine, state: EngineState, obs: Any = None) -> Array:
+        B = state.batch_size
+        if self.mode == "commander":
+            a64 = self._raw(engine.global_state(state)).astype(np.float64)
+            if self.residual > 0:
+                a64 = np.clip(self._plan(engine, state) + self.residual * a64, -1.0, 1.0)
+            return a64.reshape(B, engine.n_l, engine.p)
+        o = engine.observe(state) if not isinstance(obs, np.ndarray) else obs  # (B, n_l, obs_dim)
+        a = self.act(o.reshape(B * engine.n_l, -1))
+        return a.reshape(B, engine.n_l, engine.p).astype(np.float64)
+
+
+def load_policy(spec: str | Path | Policy, env: Engine | Any) -> Policy:
+    """``"analytic"`` -> :class:`AnalyticPolicy`; a path -> :class:`LearnedPolicy`; a Policy is returned as is.
+
+    ``env``: an :class:`Engine` or a formation_v0 env (the policy acts in its engine).
+    """
+    if isinstance(spec, Policy):
+        return spec
+    if str(spec) == "analytic":
+        return AnalyticPolicy(env)
+    return LearnedPolicy.load(spec, env)

@@ -1,0 +1,140 @@
+"""Analytic planners, the policy interface and the evaluation harness (agents/, train/evaluate.py)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from agents.planner import FieldPlanner, ManeuverPlanner, PassagePlanner, make_planner
+from agents.policy import AnalyticPolicy, LearnedPolicy, decode_state, load_policy
+from formation_env.env.engine import Engine
+from train.evaluate import METRIC_KEYS, evaluate, reset_paired, run_batch, wilson
+
+SEEDS = [0, 1, 2, 3, 4, 5, 6, 7]
+
+
+@pytest.fixture(scope="module")
+def passage() -> Engine:
+    return Engine("narrow_passage")
+
+
+def test_planner_solves_narrow_passage_without_collisions(passage: Engine) -> None:
+    res = run_batch(passage, lambda e, s, o: PassagePlanner()(e, s), SEEDS)
+    assert res["success"].all()
+    assert not res["collision"].any()
+    assert (res["min_clearance"] > 0).all()
+    assert np.all(res["time_to_goal"] < 12.0)
+
+
+@pytest.mark.parametrize("scenario", ["maneuver", "obstacle_field"])
+def test_planners_of_other_scenarios(scenario: str) -> None:
+    eng = Engine(scenario)
+    planner = make_planner(scenario)
+    assert isinstance(planner, ManeuverPlanner if scenario == "maneuver" else FieldPlanner)
+    res = run_batch(eng, lambda e, s, o: planner(e, s), SEEDS)
+    assert not res["collision"].any()
+    assert res["success"].mean() >= 0.75
+
+
+def test_make_planner_refuses_unknown_scenario() -> None:
+    with pytest.raises(ValueError, match="no analytic planner"):
+        make_planner("nope")
+
+
+def test_analytic_policy_shapes_and_bounds(passage: Engine) -> None:
+    pol = load_policy("analytic", passage)
+    assert isinstance(pol, AnalyticPolicy)
+    state = reset_paired(passage, [0, 1, 2])
+    a = pol.act_engine(passage, state)
+    assert a.shape == (3, passage.n_l, passage.p)
+    assert np.all(np.abs(a) <= 1.0)
+    # commander interface: global state in, (B, n_l p) out, equal to the engine-state path
+    gs = passage.global_state(state)
+    ac = pol.act(gs)
+    assert ac.shape == (3, passage.n_l * passage.p) and ac.dtype == np.float32
+    assert np.all(np.abs(ac) <= 1.0)
+    np.testing.assert_allclose(ac, a.reshape(3, -1), atol=1e-3)
+
+
+def test_decode_state_round_trip(passage: Engine) -> None:
+    state = reset_paired(passage, [3, 4])
+    dec = decode_state(passage, passage.global_state(state))
+    np.testing.assert_allclose(dec.pos, state.pos, atol=1e-5)
+    for key in ("wall_x", "gap_center", "gap_width"):
+        np.testing.assert_allclose(dec.params[key], state.params[key], atol=1e-5)
+
+
+def test_act_parallel_on_pettingzoo_env() -> None:
+    from formation_env import formation_v0
+
+    env = formation_v0.parallel_env(scenario="narrow_passage")
+    obs, _ = env.reset(seed=0)
+    pol = load_policy("analytic", env)
+    acts = pol.act_parallel(obs, env)
+    assert set(acts) == set(env.agents)
+    for a in acts.values():
+        assert a.shape == (env.engine.p,) and np.all(np.abs(a) <= 1.0)
+    for _ in range(5):
+        obs, *_ = env.step(pol.act_parallel(obs, env))
+
+
+def test_learned_policy_missing_file_raises(tmp_path) -> None:
+    with pytest.raises(FileNotFoundError, match="no saved model"):
+        LearnedPolicy.load(tmp_path / "none.zip")
+
+
+def test_wilson_interval() -> None:
+    lo, hi = wilson(10, 10)
+    assert hi == 1.0 and 0.69 < lo < 0.73
+    lo, hi = wilson(0, 10)
+    assert lo == 0.0 and 0.27 < hi < 0.31
+
+
+def test_evaluate_pairs_seeds_and_json_contract(tmp_path) -> None:
+    a = evaluate("analytic", "narrow_passage", 4, seed=5, generalisation=False)
+    b = evaluate(AnalyticPolicy(Engine("narrow_passage")), "narrow_passage", 4, seed=5, generalisation=False)
+    assert a["seeds"] == [5, 8]
+    assert a["per_episode"]["time_to_goal"] == b["per_episode"]["time_to_goal"]  # paired, deterministic
+    c = evaluate("analytic", "narrow_passage", 4, seed=6, generalisation=False)
+    assert c["per_episode"]["time_to_goal"][:3] == a["per_episode"]["time_to_goal"][1:]  # episode = seed
+    assert set(a["metrics"]) == set(METRIC_KEYS)
+
+
+def test_cli_evaluate_json(tmp_path, capsys) -> None:
+    from formation_env.cli import main
+
+    rc = main(["evaluate", "--policy", "analytic", "--episodes", "3", "--seed", "0", "--json", "--out", str(tmp_path)])
+    assert rc == 0
+    blob = json.loads(capsys.readouterr().out)
+    m = blob["metrics"]
+    for key in ("success_rate", "collision_rate", "time_to_goal"):
+        assert key in m
+    assert set(m) == set(METRIC_KEYS)
+    assert m["success_rate"] == 1.0 and m["collision_rate"] == 0.0
+    assert math.isfinite(m["time_to_goal"])
+    assert (tmp_path / "metrics_analytic.md").exists() and (tmp_path / "episodes_analytic.csv").exists()
+    assert (tmp_path / "episode_analytic.gif").exists()
+
+
+def test_report_section(tmp_path, monkeypatch) -> None:
+    import agents.report_section as rs
+
+    monkeypatch.setitem(rs.STANDARD_SUITE, "quick_episodes", 3)
+    lines = rs.evaluation_section(tmp_path, quick=True)
+    text = "\n".join(lines)
+    assert "| analytic |" in text and "narrow_0.8-1.0" in text
+    assert (tmp_path / "evaluation" / "comparison.png").exists()
+
+
+def test_paired_difference() -> None:
+    from train.evaluate import paired_difference
+
+    a = evaluate("analytic", "narrow_passage", 3, seed=0, generalisation=False)
+    m, lo, hi, k = paired_difference(a, a)
+    assert (m, lo, hi, k) == (0.0, 0.0, 0.0, 3)
+    b = evaluate("analytic", "narrow_passage", 3, seed=1, generalisation=False)
+    with pytest.raises(ValueError, match="not paired"):
+        paired_difference(a, b)

@@ -1,0 +1,401 @@
+"""Evaluation harness: a fixed seeded suite, episodes paired by seed across policies, metrics with CIs.
+
+Episode i of a suite with base seed S is drawn with ``Engine.reset(np.random.default_rng(S + i), 1)``,
+so every policy meets the same episodes (paired by seed). The episodes run batched through the pure
+engine (one ``step`` for the whole suite); a policy acts on the batch through
+:meth:`agents.policy.Policy.act_engine` (analytic planners read the engine state, learned commander
+policies the commander observation), so the harness never cares which it runs.
+
+Metrics (per episode, then aggregated with 95 % confidence intervals: Wilson for rates, Student t
+for means):
+
+==================  ==========================================================================
+key                 meaning
+==================  ==========================================================================
+success_rate        the scenario's success (goal pose reached, formation error below tolerance)
+collision_rate      any contact (agent-agent, wall, circle, world box) during the episode
+time_to_goal        s, first success, over successful episodes
+mean_formation_err  m, affine-image formation error averaged over the episode's samples
+max_formation_err   m, largest formation error of the episode
+min_clearance       m, smallest clearance to obstacles/agents (negative: contact)
+control_effort      sum over samples and leaders of |u|^2 dt  (u in m/s^2 for double integrators)
+==================  ==========================================================================
+
+``python -m train.evaluate --policy analytic --scenario narrow_passage --episodes 100 --seed 0 --json``
+(also ``formation-env evaluate``) prints ``{"metrics": {...}}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from formation_env.env.engine import Engine, EngineState
+from formation_env.env.vector import reset_batch, stack_states
+
+__all__ = ["METRIC_KEYS", "evaluate", "mean_ci", "paired_difference", "run_batch", "stack_states", "wilson"]
+
+Array = NDArray[np.float64]
+
+#: The keys of ``evaluate(...)["metrics"]`` (the JSON contract).
+METRIC_KEYS: tuple[str, ...] = (
+    "success_rate",
+    "collision_rate",
+    "time_to_goal",
+    "mean_formation_err",
+    "max_formation_err",
+    "min_clearance",
+    "control_effort",
+)
+
+#: Gap widths (m) of the generalisation check: training range is [1.0, 1.6].
+GAP_SUITES: dict[str, tuple[float, float]] = {
+    "train_range": (1.0, 1.6),
+    "narrow_0.8-1.0": (0.8, 1.0),
+    "wide_1.6-2.0": (1.6, 2.0),
+}
+
+ActFn = Callable[[Engine, EngineState, Any], Array]
+
+
+def reset_paired(engine: Engine, seeds: Sequence[int]) -> EngineState:
+    """One episode per seed (``Engine.reset(default_rng(seed), 1)`` each), stacked: the paired suite."""
+    return reset_batch(engine, [np.random.default_rng(int(s)) for s in seeds])
+
+
+def run_batch(
+    engine: Engine, act: ActFn, seeds: Sequence[int], record: int | None = None, max_steps: int | None = None
+) -> dict[str, Any]:
+    """Roll out one episode per seed, batched; ``act(engine, state, obs) -> (B, n_l, p)``.
+
+    Finished episodes keep stepping (their results are frozen at their end). ``record``: index of an
+    episode whose renderer frames (``engine.frame`` dicts) are kept under ``"frames"``.
+
+    Returns per-episode arrays (B,): success, collision (bool), time_to_goal (s, nan if none),
+    mean_formation_err, max_formation_err, min_clearance (m), control_effort, steps.
+    """
+    state = reset_paired(engine, seeds)
+    B = state.batch_size
+    obs = engine.observe(state)
+    steps = engine.max_cycles if max_steps is None else int(max_steps)
+    done = np.zeros(B, bool)
+    success = np.zeros(B, bool)
+    collision = np.zeros(B, bool)
+    t_goal = np.full(B, np.nan)
+    err_sum = np.zeros(B)
+    err_max = state.err.copy()
+    n_samples = np.zeros(B)
+    clear = np.full(B, np.inf)
+    effort = np.zeros(B)
+    frames: list[dict[str, Any]] = []
+    trail: list[Array] = []
+    if record is not None:
+        trail.append(state.pos[record].copy())
+        frames.append(engine.frame(state, record, np.array(trail)))
+    for _ in range(steps):
+        a = act(engine, state, obs)
+        was = state
+        state, obs, _r, term, trunc, info = engine.step(state, a)
+        live = ~done
+        err_sum += np.where(live, info["formation_error"], 0.0)
+        err_max = np.where(live, np.maximum(err_max, info["formation_error"]), err_max)
+        n_samples += live
+        clear = np.where(live, np.minimum(clear, info["min_clearance"]), clear)
+        effort += np.where(live, info["control_effort"].sum(axis=1) * engine.dt, 0.0)
+        newly = live & info["success"]
+        t_goal[newly & np.isnan(t_goal)] = info["time"][newly & np.isnan(t_goal)]
+        success |= newly
+        collision |= live & info["collision"]
+        if record is not None and not done[record]:
+            trail.append(state.pos[record].copy())
+            frames.append(engine.frame(state, record, np.array(trail[-60:])))
+        done |= term | trunc
+        del was
+        if done.all():
+            break
+    if not engine.scenario.terminate_on_success:  # judged at the last sample (e.g. maneuver)
+        success = success & info["success"]
+    return {
+        "success": success & ~collision,
+        "collision": collision,
+        "time_to_goal": np.where(success & ~collision, t_goal, np.nan),
+        "mean_formation_err": err_sum / np.maximum(n_samples, 1),
+        "max_formation_err": err_max,
+        "min_clearance": clear,
+        "control_effort": effort,
+        "steps": n_samples,
+        "frames": frames,
+    }
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """Wilson score interval of a rate k / n."""
+    if n == 0:
+        return (float("nan"), float("nan"))
+    p = k / n
+    den = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / den
+    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return (max(0.0, c - h), min(1.0, c + h))
+
+
+def mean_ci(x: Array) -> tuple[float, float, float]:
+    """Mean and Student-t 95 % interval of the finite entries of x (nan when empty)."""
+    from scipy import stats
+
+    x = np.asarray(x, dtype=np.float64)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return (float("nan"), float("nan"), float("nan"))
+    m = float(x.mean())
+    if x.size < 2:
+        return (m, m, m)
+    h = float(stats.t.ppf(0.975, x.size - 1) * x.std(ddof=1) / math.sqrt(x.size))
+    return (m, m - h, m + h)
+
+
+def paired_difference(
+    a: dict[str, Any], b: dict[str, Any], key: str = "time_to_goal"
+) -> tuple[float, float, float, int]:
+    """Mean, 95 % t interval and count of b - a over the episodes (same seeds) where both are finite."""
+    if a["seeds"] != b["seeds"]:
+        raise ValueError(f"results are not paired: seeds {a['seeds']} vs {b['seeds']}")
+    x = np.asarray(a["per_episode"][key], dtype=np.float64)
+    y = np.asarray(b["per_episode"][key], dtype=np.float64)
+    diff = y - x
+    m, lo, hi = mean_ci(diff)
+    return m, lo, hi, int(np.isfinite(diff).sum())
+
+
+def summarise(res: dict[str, Any]) -> tuple[dict[str, float], dict[str, list[float]]]:
+    """Metrics (the contract keys) and their 95 % intervals from ``run_batch`` results."""
+    n = int(res["success"].size)
+    metrics: dict[str, float] = {}
+    cis: dict[str, list[float]] = {}
+    for key, src in (("success_rate", "success"), ("collision_rate", "collision")):
+        k = int(res[src].sum())
+        metrics[key] = k / n
+        cis[key] = list(wilson(k, n))
+    for key in ("time_to_goal", "mean_formation_err", "control_effort"):
+        m, lo, hi = mean_ci(res[key])
+        metrics[key], cis[key] = m, [lo, hi]
+    m, lo, hi = mean_ci(res["max_formation_err"])
+    metrics["max_formation_err"], cis["max_formation_err"] = float(np.max(res["max_formation_err"])), [lo, hi]
+    m, lo, hi = mean_ci(res["min_clearance"])
+    metrics["min_clearance"], cis["min_clearance"] = float(np.min(res["min_clearance"])), [lo, hi]
+    return metrics, cis
+
+
+def make_engine(scenario: str, env_kwargs: dict[str, Any] | None = None) -> Engine:
+    """The evaluation engine (the env's defaults: double integrators, ``dynamic`` law, dt 0.1 s, 400 samples)."""
+    return Engine(scenario, **(env_kwargs or {}))
+
+
+def gap_engine(gap_width: tuple[float, float], env_kwargs: dict[str, Any] | None = None) -> Engine:
+    """A ``narrow_passage`` engine whose gap widths are drawn from ``gap_width`` (m)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return make_engine("narrow_passage", {**(env_kwargs or {}), "gap_width": gap_width})
+
+
+def evaluate(
+    policy_spec: str | Any,
+    scenario: str = "narrow_passage",
+    episodes: int = 100,
+    seed: int = 0,
+    *,
+    env_kwargs: dict[str, Any] | None = None,
+    out: str | Path | None = None,
+    gif: bool = True,
+    generalisation: bool = True,
+) -> dict[str, Any]:
+    """Evaluate a policy on the seeded suite ``seed .. seed + episodes - 1`` of ``scenario``.
+
+    Args:
+        policy_spec: ``"analytic"``, a path to a saved model (.zip), or a :class:`agents.policy.Policy`.
+        env_kwargs: engine arguments (scenario keyword arguments included).
+        out: folder for ``episodes.csv``, ``metrics.json``, ``metrics.md``, plots and a GIF (None: nothing written).
+        generalisation: for ``narrow_passage``, also evaluate gap widths outside the training range.
+    Returns:
+        ``{"metrics": {METRIC_KEYS...}, "ci95": {...}, "episodes": n, "seeds": [...], "policy": name,
+        "scenario": ..., "per_episode": {...}, "generalisation": {suite: metrics}}``.
+    """
+    from agents.policy import load_policy
+
+    engine = make_engine(scenario, env_kwargs)
+    policy = load_policy(policy_spec, engine) if isinstance(policy_spec, (str, Path)) else policy_spec
+    seeds = list(range(int(seed), int(seed) + int(episodes)))
+    res = run_batch(engine, policy.act_engine, seeds)
+    metrics, cis = summarise(res)
+    result: dict[str, Any] = {
+        "metrics": metrics,
+        "ci95": cis,
+        "episodes": len(seeds),
+        "seeds": [seeds[0], seeds[-1]],
+        "policy": policy.name,
+        "scenario": scenario,
+        "per_episode": {k: np.asarray(v).tolist() for k, v in res.items() if k != "frames"},
+    }
+    if generalisation and scenario == "narrow_passage":
+        gen = {}
+        for name, rng_w in GAP_SUITES.items():
+            if name == "train_range":
+                continue
+            eng = gap_engine(rng_w, env_kwargs)
+            gen[name] = summarise(run_batch(eng, policy.act_engine, seeds))[0]
+        result["generalisation"] = gen
+    if out is not None:
+        write_outputs(result, engine, policy, seeds, Path(out), gif=gif)
+    return result
+
+
+def _finite(x: Any) -> Any:
+    """``x`` with NaN and inf floats replaced by None (strict JSON)."""
+    if isinstance(x, dict):
+        return {k: _finite(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_finite(v) for v in x]
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def _fmt(v: float) -> str:
+    return "nan" if not np.isfinite(v) else f"{v:.3g}"
+
+
+def markdown_table(results: Sequence[dict[str, Any]]) -> list[str]:
+    """A markdown table of metrics with 95 % intervals, one row per result."""
+    head = "| policy | " + " | ".join(METRIC_KEYS) + " |"
+    lines = [head, "|" + "---|" * (len(METRIC_KEYS) + 1)]
+    for r in results:
+        cells = []
+        for k in METRIC_KEYS:
+            lo, hi = r["ci95"][k]
+            cells.append(f"{_fmt(r['metrics'][k])} [{_fmt(lo)}, {_fmt(hi)}]")
+        lines.append(f"| {r['policy']} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def write_outputs(
+    result: dict[str, Any], engine: Engine, policy: Any, seeds: Sequence[int], out: Path, gif: bool = True
+) -> None:
+    """episodes.csv, metrics.json, metrics.md, a histogram plot and a GIF of a typical episode."""
+    import csv
+
+    out.mkdir(parents=True, exist_ok=True)
+    tag = policy.name.replace("/", "_")
+    pe = result["per_episode"]
+    with open(out / f"episodes_{tag}.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        keys = list(pe)
+        w.writerow(["seed", *keys])
+        for i, s in enumerate(seeds):
+            w.writerow([s, *[pe[k][i] for k in keys]])
+    (out / f"metrics_{tag}.json").write_text(
+        json.dumps(_finite({k: v for k, v in result.items() if k != "per_episode"}), indent=2)
+    )
+    lines = markdown_table([result])
+    if "generalisation" in result:
+        lines += ["", "Gap widths outside the training range [1.0, 1.6] m:", ""]
+        lines += ["| suite | success_rate | collision_rate | time_to_goal |", "|---|---|---|---|"]
+        for name, m in result["generalisation"].items():
+            lines.append(
+                f"| {name} | {_fmt(m['success_rate'])} | {_fmt(m['collision_rate'])} | {_fmt(m['time_to_goal'])} |"
+            )
+    (out / f"metrics_{tag}.md").write_text("\n".join(lines) + "\n")
+    plot_episodes([result], out / f"episodes_{tag}.png")
+    if gif:
+        save_gif(engine, policy, seeds, result, out / f"episode_{tag}.gif")
+
+
+def plot_episodes(results: Sequence[dict[str, Any]], path: Path) -> Path:
+    """Histograms of time to goal and min clearance, one colour per policy."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(12, 3.2))
+    for r in results:
+        pe = r["per_episode"]
+        for ax, key, unit in zip(
+            axes, ("time_to_goal", "min_clearance", "mean_formation_err"), ("s", "m", "m"), strict=True
+        ):
+            x = np.asarray(pe[key], dtype=np.float64)
+            x = x[np.isfinite(x)]
+            if x.size:
+                ax.hist(x, bins=20, alpha=0.6, label=r["policy"])
+            ax.set_xlabel(f"{key} ({unit})")
+    axes[0].set_ylabel("episodes")
+    if axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def save_gif(engine: Engine, policy: Any, seeds: Sequence[int], result: dict[str, Any], path: Path) -> Path | None:
+    """GIF of a typical episode: the successful one whose time to goal is nearest the median (else the first)."""
+    from formation_env.env.rendering import Renderer
+    from formation_env.env.video import save_animation
+
+    t = np.asarray(result["per_episode"]["time_to_goal"], dtype=np.float64)
+    ok = np.isfinite(t)
+    idx = int(np.argmin(np.where(ok, np.abs(t - np.nanmedian(t)), np.inf))) if ok.any() else 0
+    res = run_batch(engine, policy.act_engine, [seeds[idx]], record=0)
+    try:
+        rend = Renderer(engine.d, "rgb_array", width=400, height=300)
+        rend.set_bounds(engine.bounds)
+        images = [rend.draw(f) for f in res["frames"][::2]]
+        rend.close()
+    except Exception as exc:  # rendering needs pygame; never fail an evaluation on it
+        print(f"GIF skipped: {exc}", file=sys.stderr)
+        return None
+    return save_animation([im for im in images if im is not None], path, fps=10)
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The evaluation options (shared by ``python -m train.evaluate`` and ``formation-env evaluate``)."""
+    p.add_argument("--policy", default="analytic", help="analytic, or a saved model's .zip path")
+    p.add_argument("--scenario", default="narrow_passage")
+    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--seed", type=int, default=0, help="first episode seed of the suite")
+    p.add_argument("--json", action="store_true", help='print one JSON object {"metrics": {...}}')
+    p.add_argument("--out", default=None, help="folder for CSV/JSON/markdown, plots and a GIF")
+    p.add_argument("--env-kwargs", default="", help="JSON dict of engine arguments")
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    """Run an evaluation from parsed arguments; print JSON or a table."""
+    kw = json.loads(args.env_kwargs) if getattr(args, "env_kwargs", "") else None
+    res = evaluate(args.policy, args.scenario, args.episodes, args.seed, env_kwargs=kw, out=args.out)
+    if args.json:
+        blob = {"metrics": res["metrics"], "ci95": res["ci95"], "generalisation": res.get("generalisation")}
+        print(json.dumps(_finite(blob)))
+    else:
+        print("\n".join(markdown_table([res])))
+        for name, m in res.get("generalisation", {}).items():
+            print(f"{name}: " + ", ".join(f"{k}={_fmt(v)}" for k, v in m.items()))
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m train.evaluate", description=__doc__.splitlines()[0])
+    add_arguments(p)
+    return run_cli(p.parse_args(argv))
+
+
+if __name__ == "__main__":
+    sys.exit(main())

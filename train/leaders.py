@@ -1,0 +1,324 @@
+"""Train leader policies with Stable-Baselines3 (PPO or SAC), seeded and reproducible.
+
+Modes:
+
+* ``commander``: one policy commands every leader: observation = the global state
+  (``Engine.global_state``, as ``FormationCommander-v0``), action = every leader's (n_l p,). Runs on the
+  batched :class:`formation_env.env.vector.FormationVecEnv` (``mode="commander"``, ``--n-envs`` copies).
+* ``shared``: decentralised leaders share one policy on their own observations, through
+  :class:`train.shared_vec_env.SharedPolicyVecEnv` over ``formation_v0.parallel_env`` copies.
+
+``--residual S`` (commander mode) learns a correction on top of the analytic planner:
+action = clip(planner + S * policy, -1, 1) (the planner reads the engine state of each copy).
+
+Outputs in ``--out`` (``<name>`` = ``<scenario>_<mode>``): ``<name>.zip``, ``<name>_vecnormalize.pkl``
+and ``<name>_config.json`` side by side (what :class:`agents.policy.LearnedPolicy` loads),
+``checkpoints/`` (CheckpointCallback), ``tb/`` (TensorBoard), ``curve.csv`` and ``curve.png``
+(training curve: episode return and success rate against timesteps), ``eval.json``.
+
+Reproducibility: the same ``--seed`` gives the same weights (torch on one thread; the vector env
+seeds copy i with ``TRAIN_SEED_OFFSET`` + seed + i, away from the evaluation seeds; PPO/SAC seeded).
+``--smoke``: a tiny run (train, save, load, evaluate
+two episodes) for CI.
+
+Example::
+
+    python -m train.leaders --algo ppo --mode commander --scenario narrow_passage \\
+        --timesteps 300000 --seed 0 --out runs/np_ppo
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
+from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor, VecNormalize
+
+__all__ = ["TRAIN_SEED_OFFSET", "ResidualVecEnv", "main", "make_venv", "train"]
+
+#: Training episodes come from generators seeded TRAIN_SEED_OFFSET + seed + copy, disjoint from the
+#: evaluation suite's episode seeds (0..999) and the planner's tuning seeds (10_000..).
+TRAIN_SEED_OFFSET = 1_000_000
+
+
+class ResidualVecEnv(VecEnvWrapper):
+    """Commander actions as corrections of the analytic planner: a = clip(planner + scale * action, -1, 1).
+
+    Wraps a :class:`FormationVecEnv` in ``commander`` mode (the planner reads its batched ``state``).
+    """
+
+    def __init__(self, venv: Any, scale: float) -> None:
+        super().__init__(venv)
+        from agents.planner import make_planner
+
+        self.base = venv
+        self.scale = float(scale)
+        self.planner = make_planner(venv.engine.scenario_name)
+
+    def reset(self) -> Any:
+        return self.venv.reset()
+
+    def step_async(self, actions: np.ndarray) -> None:
+        eng = self.base.engine
+        plan = self.planner(eng, self.base.state).reshape(self.base.n_envs, -1)
+        self.venv.step_async(np.clip(plan + self.scale * np.asarray(actions), -1.0, 1.0))
+
+    def step_wait(self) -> Any:
+        return self.venv.step_wait()
+
+
+def make_venv(
+    mode: str, scenario: str, n_envs: int, seed: int, env_kwargs: dict[str, Any], residual: float = 0.0
+) -> VecEnv:
+    """The raw (un-normalised) training VecEnv of ``mode``, seeded with ``seed``."""
+    if mode == "commander":
+        from formation_env.env.vector import FormationVecEnv
+
+        venv: VecEnv = FormationVecEnv(scenario, num_envs=n_envs, mode="commander", seed=seed, **env_kwargs)
+        if residual > 0:
+            venv = ResidualVecEnv(venv, residual)
+        return venv
+    if mode == "shared":
+        if residual > 0:
+            raise ValueError("--residual is for commander mode only")
+        from formation_env import formation_v0
+
+        from .shared_vec_env import SharedPolicyVecEnv
+
+        venv = SharedPolicyVecEnv([lambda: formation_v0.parallel_env(scenario=scenario, **env_kwargs)] * n_envs)
+        venv.seed(seed)
+        return venv
+    raise ValueError(f"mode must be 'commander' or 'shared', got {mode!r}")
+
+
+class CurveCallback(BaseCallback):
+    """Records (timesteps, mean return, success rate, mean episode time) over finished episodes per rollout."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.rows: list[tuple[int, float, float, float]] = []
+        self._ret: list[float] = []
+        self._succ: list[float] = []
+        self._time: list[float] = []
+
+    def _on_step(self) -> bool:
+        for info in self.locals.get("infos", []):
+            ep = info.get("episode")
+            if ep is not None:
+                self._ret.append(float(ep["r"]))
+                self._succ.append(float(info.get("success", False)))
+                self._time.append(float(info.get("time", np.nan)))
+        return True
+
+    def _on_rollout_end(self) -> None:
+        if self._ret:
+            self.rows.append(
+                (self.num_timesteps, float(np.mean(self._ret)), float(np.mean(self._succ)), float(np.mean(self._time)))
+            )
+            self.logger.record("rollout/success_rate", float(np.mean(self._succ)))
+            self._ret, self._succ, self._time = [], [], []
+
+
+def plot_curve(rows: Sequence[tuple[int, float, float, float]], path: Path, title: str) -> Path:
+    """Training curve PNG: mean episode return, success rate and episode length (s) against timesteps.
+
+    Thin lines are per rollout, thick ones a moving average over 20 rollouts.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    arr = np.array(rows, dtype=np.float64).reshape(-1, 4)
+    fig, ax = plt.subplots(1, 3, figsize=(12, 3.2))
+    labels = ("mean episode return", "success rate (training episodes)", "episode length (s)")
+    w = min(20, max(len(arr), 1))
+    for j, lab in enumerate(labels):
+        y = arr[:, j + 1]
+        ax[j].plot(arr[:, 0], y, lw=0.6, alpha=0.5)
+        if len(y) >= w:
+            ax[j].plot(arr[w - 1 :, 0], np.convolve(y, np.ones(w) / w, mode="valid"), lw=2)
+        ax[j].set_xlabel("timesteps")
+        ax[j].set_ylabel(lab)
+    ax[1].set_ylim(-0.02, 1.02)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def train(
+    algo: str = "ppo",
+    mode: str = "commander",
+    scenario: str = "narrow_passage",
+    timesteps: int = 100_000,
+    seed: int = 0,
+    out: str | Path = "runs/leaders",
+    *,
+    smoke: bool = False,
+    n_envs: int = 16,
+    residual: float = 0.0,
+    env_kwargs: dict[str, Any] | None = None,
+    progress_bar: bool | None = None,
+    eval_episodes: int | None = None,
+    name: str | None = None,
+) -> dict[str, Any]:
+    """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
+
+    Args:
+        algo: ``"ppo"`` | ``"sac"``. mode: ``"commander"`` | ``"shared"``.
+        timesteps: environment steps (slots x steps) to train.
+        n_envs: environment copies (commander: slots; shared: copies x leaders slots).
+        residual: > 0 learns a correction of scale ``residual`` on the analytic planner (commander).
+        env_kwargs: engine arguments, e.g. ``{"reward_weights": {"distance": 0.2}}``.
+        progress_bar: SB3's progress bar (None: only on a TTY and not in smoke runs).
+        eval_episodes: evaluation episodes after training (default 2 for smoke, 50 otherwise).
+    """
+    import torch
+    from stable_baselines3 import PPO, SAC
+
+    torch.set_num_threads(1)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    env_kwargs = dict(env_kwargs or {})
+    if smoke:
+        timesteps = min(int(timesteps), 1024)
+        n_envs = min(n_envs, 4)
+    name = name or f"{scenario}_{mode}"
+    t0 = time.time()
+    raw = make_venv(mode, scenario, n_envs, TRAIN_SEED_OFFSET + seed, env_kwargs, residual)
+    venv = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
+    policy_kwargs: dict[str, Any] = {"net_arch": [64, 64]}
+    if algo == "ppo":
+        if residual > 0:
+            policy_kwargs["log_std_init"] = -1.0
+        n_steps = 16 if smoke else 256
+        model: Any = PPO(
+            "MlpPolicy",
+            venv,
+            n_steps=n_steps,
+            batch_size=min(256, n_steps * venv.num_envs),
+            n_epochs=2 if smoke else 5,
+            learning_rate=3e-4,
+            gamma=0.99,
+            gae_lambda=0.95,
+            ent_coef=0.0,
+            policy_kwargs=policy_kwargs,
+            seed=seed,
+            device="cpu",
+            tensorboard_log=str(out / "tb"),
+            verbose=0,
+        )
+    elif algo == "sac":
+        model = SAC(
+            "MlpPolicy",
+            venv,
+            buffer_size=100_000,
+            learning_starts=64 if smoke else 2_000,
+            batch_size=64 if smoke else 256,
+            train_freq=1,
+            gradient_steps=1,
+            policy_kwargs=policy_kwargs,
+            seed=seed,
+            device="cpu",
+            tensorboard_log=str(out / "tb"),
+            verbose=0,
+        )
+    else:
+        raise ValueError(f"algo must be 'ppo' or 'sac', got {algo!r}")
+    curve = CurveCallback()
+    ckpt = CheckpointCallback(
+        save_freq=max(int(timesteps) // (4 * venv.num_envs), 1),
+        save_path=str(out / "checkpoints"),
+        name_prefix=name,
+        save_vecnormalize=True,
+    )
+    if progress_bar is None:
+        progress_bar = sys.stdout.isatty() and not smoke
+    model.learn(int(timesteps), callback=CallbackList([curve, ckpt]), progress_bar=progress_bar, tb_log_name=name)
+    wall = time.time() - t0
+    stem = out / name
+    model.save(str(stem) + ".zip")
+    venv.save(f"{stem}_vecnormalize.pkl")
+    config: dict[str, Any] = {
+        "name": f"{algo}_{mode}" + ("_residual" if residual > 0 else ""),
+        "algo": algo,
+        "mode": mode,
+        "scenario": scenario,
+        "timesteps": int(timesteps),
+        "seed": int(seed),
+        "n_envs": int(n_envs),
+        "residual": float(residual),
+        "env_kwargs": env_kwargs,
+        "observation": "global_state" if mode == "commander" else "leader_observation",
+        "wall_time_s": round(wall, 1),
+        "command": "python -m train.leaders " + " ".join(sys.argv[1:]) if sys.argv[0].endswith("leaders.py") else "",
+        "sb3_policy_kwargs": {k: v for k, v in policy_kwargs.items()},
+    }
+    (out / f"{name}_config.json").write_text(json.dumps(config, indent=2))
+    with open(out / "curve.csv", "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["timesteps", "mean_return", "success_rate", "mean_episode_time_s"])
+        w.writerows(curve.rows)
+    if curve.rows:
+        plot_curve(curve.rows, out / "curve.png", f"{algo} {mode} {scenario}, seed {seed}")
+    venv.close()
+    from train.evaluate import evaluate
+
+    n_eval = eval_episodes if eval_episodes is not None else (2 if smoke else 50)
+    res = evaluate(
+        str(stem) + ".zip",
+        scenario,
+        n_eval,
+        seed=0,
+        gif=not smoke,
+        generalisation=not smoke,
+        out=None if smoke else out / "eval",
+    )
+    config["eval"] = {"episodes": n_eval, "metrics": res["metrics"]}
+    (out / "eval.json").write_text(json.dumps(config["eval"], indent=2))
+    return config
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m train.leaders", description=__doc__.splitlines()[0])
+    p.add_argument("--algo", choices=["ppo", "sac"], default="ppo")
+    p.add_argument("--mode", choices=["commander", "shared"], default="commander")
+    p.add_argument("--scenario", default="narrow_passage")
+    p.add_argument("--timesteps", type=int, default=100_000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", default="runs/leaders")
+    p.add_argument("--n-envs", type=int, default=16)
+    p.add_argument("--residual", type=float, default=0.0, help="learn a correction of this scale on the planner")
+    p.add_argument("--env-kwargs", default="", help='JSON engine arguments, e.g. {"reward_weights": {"distance": 0.2}}')
+    p.add_argument("--eval-episodes", type=int, default=None)
+    p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
+    a = p.parse_args(argv)
+    cfg = train(
+        a.algo,
+        a.mode,
+        a.scenario,
+        a.timesteps,
+        a.seed,
+        a.out,
+        smoke=a.smoke,
+        n_envs=a.n_envs,
+        residual=a.residual,
+        env_kwargs=json.loads(a.env_kwargs) if a.env_kwargs else None,
+        eval_episodes=a.eval_episodes,
+    )
+    print(json.dumps({k: cfg[k] for k in ("name", "wall_time_s", "eval")}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

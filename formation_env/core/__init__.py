@@ -19,7 +19,7 @@ from .affine import (
     translate,
 )
 from .analysis import StabilityReport, extreme_eigenvalues, stability_report
-# DESIGN_IMPORT from .design import condition_number, design_stress
+from .design import condition_number, design_stress
 from .dynamics import LinearDynamics, c2d_zoh, dare, dlqr, riccati_gain
 from .errors import (
     ControlDimension,
@@ -43,6 +43,7 @@ from .stress import (
 )
 
 __all__ = [
+    "LAWS",
     "AffineImage",
     "ControlDimension",
     "DynamicLeaderLaw",
@@ -50,7 +51,6 @@ __all__ = [
     "FormationError",
     "Framework",
     "FrameworkError",
-    "LAWS",
     "LinearDynamics",
     "Maneuver",
     "PaperLinearLaw",

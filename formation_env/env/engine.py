@@ -331,6 +331,8 @@ class Engine:
         if int(n_rays) != n_rays or n_rays < 1 or int(n_nearest) != n_nearest or n_nearest < 1:
             raise FormationError(f"n_rays and n_nearest must be positive integers, got {n_rays}, {n_nearest}")
         self.scenario_name = scenario
+        if isinstance(framework, Framework) and framework.n > MAX_AGENTS:  # refuse before designing a stress
+            raise FormationError(f"the env takes frameworks of at most {MAX_AGENTS} agents, got {framework.n}")
         fw, om = resolve_framework(framework, omega, CLASSES[scenario].default_framework)
         if fw.n > MAX_AGENTS:
             raise FormationError(f"the env takes frameworks of at most {MAX_AGENTS} agents, got {fw.n}")

@@ -10,23 +10,26 @@ outside the scope"). :func:`design_stress` computes one by three methods:
     of the orthogonal complement of span([r, 1]) (dimension p = n - d - 1), the
     SDP maximises t subject to Q^T Omega(c) Q >= t I and trace(Q^T Omega(c) Q) = p.
     t > 0 certifies a PSD stress of rank n - d - 1 (Lemma 1); the optimum t <= 0
-    proves that the framework has none.
+    proves that the framework has none (for generic positions: it is not
+    universally rigid).
 ``"min_cond"`` (alias ``"fast"``)
     The stress with the fastest sampled-data law: the error of eq. (17) decays as
     rho(I - T Omega_ff)^k, and the best rho over T is (kappa - 1) / (kappa + 1) with
     kappa = cond(Omega_ff), at T = 2 / (lambda_min + lambda_max). The SDP minimises s
-    subject to I <= Omega_ff(c) <= s I. With exactly d + 1 leaders that spanning
-    R^d, Omega_ff > 0 and Omega [r, 1] = 0 already imply Omega >= 0 with rank
-    n - d - 1 (the leaders' Schur complement S satisfies S [r_l, 1] = 0 with
-    [r_l, 1] invertible, so S = 0). With more leaders the constraint
+    subject to I <= Omega_ff(c) <= s I. With exactly d + 1 leaders spanning R^d,
+    Omega_ff > 0 and Omega [r, 1] = 0 already imply Omega >= 0 with rank n - d - 1
+    (the leaders' Schur complement S satisfies S [r_l, 1] = 0 with [r_l, 1]
+    invertible, so S = 0). With more leaders the constraint
     Q^T Omega(c) Q >= 1e-4 s I is added.
 ``"constructive"``
     No solver, fully sparse, for trilateration frameworks: every agent j > d joins
     d + 1 earlier agents that with j form a clique K_{d+2}. The d + 2 points of a
     clique in general position carry a one-dimensional space of equilibrium
     stresses with stress matrix a a^T, a spanning the null space of
-    [[p_1 .. p_{d+2}], [1 .. 1]] ((d + 1) x (d + 2)); a_j != 0, so each clique adds
-    one to the rank and the sum is PSD with rank n - d - 1.
+    [[p_1 .. p_{d+2}], [1 .. 1]] ((d + 1) x (d + 2)). a is nonzero at the clique's
+    newest agent j (its d + 1 partners are affinely independent), so each clique
+    adds one to the rank and the sum is PSD with rank n - d - 1. One batched SVD
+    and one COO assembly: n = 10,000 in 2D in about 0.15 s, check included.
 
 Every result is checked with :func:`check_stress` before it is returned and is
 scaled so that the largest eigenvalue of Omega_ff is 1: the stationary-leader law
@@ -34,7 +37,11 @@ scaled so that the largest eigenvalue of Omega_ff is 1: the stationary-leader la
 
 Solvers. Clarabel at its default settings stops at the first iteration with
 ``NumericalError`` on the trace-normalised SDP; a static regularisation of 1e-7
-fixes it (:data:`SOLVER_SETTINGS`). SCS is the fallback, with tight tolerances and
+fixes it (:data:`SOLVER_SETTINGS`). Its chordal decomposition is switched off:
+on the sparse Omega_ff LMIs of trilateration frameworks its clique-graph merge
+either panicked (index out of bounds) or looped with memory growing past 8 GB.
+With these settings Clarabel solved all of about 500 random kNN and trilateration
+frameworks (2D and 3D, n <= 40) tried while writing this. SCS is the fallback, with tight tolerances and
 an iteration cap; at n = 100 it can stop "optimal" with a negative eigenvalue, so
 every answer is verified here and, if it fails, polished (eigenvalues clipped in
 the stress space, then projected back, a few dozen rounds) before the next solver
@@ -77,7 +84,7 @@ _ALIASES = {"fast": "min_cond"}
 
 #: cvxpy solvers tried in order when ``solver=None``, with the settings that made them robust here.
 SOLVER_SETTINGS: dict[str, dict[str, Any]] = {
-    "CLARABEL": {"static_regularization_constant": 1e-7, "max_iter": 300},
+    "CLARABEL": {"static_regularization_constant": 1e-7, "chordal_decomposition_enable": False, "max_iter": 300},
     "SCS": {"eps_abs": 1e-9, "eps_rel": 1e-9, "max_iters": 10_000},
 }
 
@@ -200,8 +207,8 @@ def _solve(fw: Framework, method: str, rtol: float, solver: str | None, verbose:
     c = cp.Variable(k)
 
     def lmi(g: NDArray[np.float64]) -> Any:
-        s = g.shape[1]
-        x = cp.reshape(g.reshape(k, s * s).T @ c, (s, s), order="F")
+        size = g.shape[1]
+        x = cp.reshape(g.reshape(k, size * size).T @ c, (size, size), order="F")
         return (x + x.T) / 2
 
     big_m = lmi(gq)
@@ -233,7 +240,7 @@ def _solve(fw: Framework, method: str, rtol: float, solver: str | None, verbose:
         if status in (cp.INFEASIBLE, cp.INFEASIBLE_INACCURATE):
             raise StressMatrixError(
                 f"no PSD equilibrium stress of rank n - d - 1 = {n - d - 1} exists ({name} reports the "
-                f"{method!r} SDP {status}): the framework is not universally rigid; add edges"
+                f"{method!r} SDP {status}): the framework is not universally rigid (for generic positions); add edges"
             )
         if c.value is None:
             failures.append(f"{name}: status {status}, no solution")
@@ -244,28 +251,45 @@ def _solve(fw: Framework, method: str, rtol: float, solver: str | None, verbose:
             raise StressMatrixError(
                 f"no PSD equilibrium stress of rank n - d - 1 = {n - d - 1} exists: the largest achievable "
                 f"smallest eigenvalue of Q^T Omega Q is t = {eig[0]:.3g} (largest {eig[-1]:.3g}, {name} optimal), "
-                "so the framework is not universally rigid; add edges"
+                "so the framework is not universally rigid (for generic positions); add edges"
             )
-        for attempt, cc in (("", coef), (" after polishing", _polish(gq, coef, rtol))):
-            if cc is None:
+        omega, why = _scaled_and_checked(fw, basis @ coef, rtol)
+        if omega is None:
+            failures.append(f"{name} ({status}): {why}")
+            polished = _polish(gq, coef, rtol)
+            if polished is None:
+                failures.append(f"{name}: polishing found no positive definite stress")
                 continue
-            omega = stress_from_weights(n, edges, basis @ cc)
-            ff_max = float(np.linalg.eigvalsh(Partition(omega, fw.leaders).omega_ff_dense)[-1])
-            try:
-                if ff_max <= 0:
-                    raise StressMatrixError(f"Omega_ff has no positive eigenvalue (largest {ff_max:.3g})")
-                omega = omega / ff_max
-                check_stress(omega, fw, rtol=rtol)
-            except StressMatrixError as exc:
-                failures.append(f"{name} ({status}){attempt}: {exc}")
+            omega, why = _scaled_and_checked(fw, basis @ polished, rtol)
+            if omega is None:
+                failures.append(f"{name} after polishing: {why}")
                 continue
-            if failures:
-                _log.info("design_stress(%r) succeeded with %s%s after: %s", method, name, attempt, failures)
-            return omega
+            warnings.warn(
+                f"design_stress({method!r}): {name}'s answer failed its check and was polished; the stress is valid "
+                "but not optimal",
+                stacklevel=3,
+            )
+        if failures:
+            _log.info("design_stress(%r) succeeded with %s after: %s", method, name, "; ".join(failures))
+        return omega
     raise StressMatrixError(
         f"design_stress({method!r}) found no valid stress for {fw.name or 'the framework'} "
         f"(n = {n}, {len(edges)} edges, {k} independent stresses): " + "; ".join(failures)
     )
+
+
+def _scaled_and_checked(fw: Framework, w: NDArray[np.float64], rtol: float) -> tuple[NDArray[np.float64] | None, str]:
+    """The stress matrix of edge weights ``w`` scaled to lambda_max(Omega_ff) = 1, or None and why it fails."""
+    omega = np.asarray(stress_from_weights(fw.n, fw.edges, w))
+    ff_max = float(np.linalg.eigvalsh(Partition(omega, fw.leaders).omega_ff_dense)[-1])
+    if ff_max <= 0:
+        return None, f"Omega_ff has no positive eigenvalue (largest {ff_max:.3g})"
+    omega = omega / ff_max
+    try:
+        check_stress(omega, fw, rtol=rtol)
+    except StressMatrixError as exc:
+        return None, str(exc)
+    return omega, ""
 
 
 def _polish(

@@ -73,7 +73,7 @@ def cmd_rollout(args: argparse.Namespace) -> int:
 
         policy = load_policy(args.policy, env)
     rng = np.random.default_rng(args.seed)
-    frames = [env.render()]
+    frames: list[Any] = [env.render()]
     info: dict[str, Any] = {}
     for _ in range(args.steps):
         if not env.agents:

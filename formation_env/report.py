@@ -109,8 +109,8 @@ def write_report(out: Path, quick: bool = False) -> Path:
     try:
         from agents.report_section import evaluation_section  # learned vs analytic (issue 5)
     except ImportError:
-        evaluation_section = None
-    if evaluation_section is not None:
+        lines.append("(learned-vs-analytic evaluation unavailable: the `agents` package is not installed)")
+    else:
         lines += evaluation_section(out, quick=quick)
     path = out / "REPORT.md"
     path.write_text("\n".join(lines) + "\n")

@@ -266,3 +266,19 @@ def test_condition_number_of_a_singular_block() -> None:
     omega[3, 3] = 1.0
     with pytest.raises(StressMatrixError, match="not positive definite"):
         condition_number(omega, [0, 1, 2])
+
+
+def test_design_bench_smoke() -> None:
+    from benchmarks import design_bench
+
+    rows = design_bench.run(quick=True, sdp_sizes=(8,), constructive_sizes=(50,))
+    assert [r["method"] for r in rows] == ["sdp", "fast", "constructive"]
+    assert all(r["cond"] >= 1.0 and r["median_s"] > 0 for r in rows)
+    assert design_bench.markdown(rows).count("\n") == len(rows) + 1
+
+
+def test_large_sdp_warns(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(design_mod, "_SLOW_SDP_N", 8)
+    fw = random_knn(10, 2, 8, 0)
+    with pytest.warns(UserWarning, match=r"with n = 10: the SDP's cost grows like n\^6"):
+        design_stress(fw)

@@ -91,6 +91,8 @@ def test_named_shapes_sizes() -> None:
     assert (lib.hexagon().n, len(lib.hexagon().edges)) == (7, 15)
     assert (lib.octahedron().n, len(lib.octahedron().edges)) == (6, 15)
     assert (lib.cube_with_center().n, len(lib.cube_with_center().edges)) == (9, 32)
+    assert (lib.square_grid().n, len(lib.square_grid().edges)) == (9, 26)
+    assert (lib.triangle_formation().n, len(lib.triangle_formation().edges)) == (10, 27)
     assert lib.triangle_formation(5).n == 15
     assert lib.bipyramid(7).n == 9
 

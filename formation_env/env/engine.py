@@ -112,8 +112,15 @@ def _designed_stress(fw: Framework) -> Array:
             f"framework {fw.name or '(custom)'} has no stress matrix: pass omega=..., or install "
             "formation_env.core.design (design_stress); a complete graph gets the Gram stress"
         ) from None
-    res = design_stress(fw)
-    return np.asarray(getattr(res, "omega", res), dtype=np.float64)
+    from formation_env.core.design import trilateration_cliques
+
+    try:  # a trilateration ordering gets the fast sparse construction instead of an SDP
+        trilateration_cliques(fw)
+        method = "constructive"
+    except FormationError:
+        method = "sdp"
+    res = design_stress(fw, method)
+    return np.asarray(res.toarray() if hasattr(res, "toarray") else res, dtype=np.float64)
 
 
 def resolve_framework(

@@ -6,6 +6,7 @@ Same engine and scenarios as the PettingZoo env (B = 1).
 
 from __future__ import annotations
 
+import math
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -180,25 +181,24 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         a = np.asarray(action, dtype=np.float64).reshape(1, -1)
         if a.shape[1] != self._n_act:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {np.shape(action)}")
-        if not np.all(np.isfinite(a)):
+        if not math.isfinite(a[0] @ a[0]) and not np.all(np.isfinite(a)):
             raise ValueError(f"action holds NaN or inf: {a[0].tolist()}; the state is unchanged")
         if self.action_mode == "leaders":
-            leader_a = a.reshape(1, eng.n_l, eng.p)
+            leader_a = a.reshape(eng.n_l, eng.p)
         else:
             a = np.clip(a, -1.0, 1.0)
             rl = eng.fw.positions[eng.leaders]
             before = affine_batch(rl, self._theta(), self._pose["b"])
             self._advance_pose(a)
             after = affine_batch(rl, self._theta(), self._pose["b"])
-            leader_a = track_targets(eng, self._state, after, (after - before) / eng.dt)
-        self._state, _, rew, term, trunc, info = eng.step(self._state, leader_a)
-        out = {k: v[0].item() for k, v in info.items() if k != "control_effort"}
-        out["control_effort"] = float(info["control_effort"][0].sum())
+            leader_a = track_targets(eng, self._state, after, (after - before) / eng.dt)[0]
+        self._state, _, rew, term, trunc, out = eng.step1(self._state, leader_a, observe=False)
+        out["control_effort"] = sum(out["control_effort"])
         self._trail.append(self._state.pos[0])
         del self._trail[:-60]
         if self.render_mode == "human":
             self.render()
-        return self._obs(), float(rew[0].mean()), bool(term[0]), bool(trunc[0]), out
+        return self._obs(), sum(rew) / len(rew), term, trunc, out
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:

@@ -30,7 +30,7 @@ from formation_env.core.framework import Framework
 from formation_env.core.laws import FollowerLaw, make_law
 from formation_env.core.stress import Partition, check_stress
 
-from . import geometry
+from . import _kernel, geometry
 from .scenarios import CLASSES, NAMED_FRAMEWORKS, REGISTRY
 from .scenarios._base import Scenario, affine_batch, gram_stress
 
@@ -413,6 +413,7 @@ class Engine:
         self._build_static()
         self._build_geometry_template()
         self._build_bounds()
+        self._build_fast1()
 
     # ------------------------------------------------------------------ construction
     @property
@@ -652,6 +653,11 @@ class Engine:
         self._state_lo64 = self.state_low.astype(np.float64)
         self._state_hi64 = self.state_high.astype(np.float64)
         self.state_dim = int(self.state_low.size)
+        pinv = self.affine._pinv  # Theta[i, j] = sum_m pinv[j, m] p_m[i], row-major in the state vector
+        tm = np.zeros((n, d, d, d))
+        for i_ in range(d):
+            tm[:, i_, i_, :] = pinv[:d].T
+        self._theta_map = tm.reshape(n * d, d * d)
         no_obstacles = (self.n_seg + self.n_circ) == 0
         self._const_sense = (np.ones(ks) if d == 2 else np.zeros(ks)) if no_obstacles else None
         # reward and effort from [success, collision, err, a^2 (n_l p), goal_dist (n_l), goal_dist' (n_l)]
@@ -689,6 +695,9 @@ class Engine:
         k = np.zeros(B, dtype=np.int64)
         ref = self._ref(params, k)
         self._episode_geometry(params, ref)
+        params["_pvec"] = np.asarray(self.scenario.param_vector(params), dtype=np.float64)  # for global_state
+        if B == 1 and self._fast1:
+            self._fold_episode(params)
         for arr in params.values():
             arr.setflags(write=False)
         geo = self._features(*self._aug(start), params, ref)
@@ -814,19 +823,18 @@ class Engine:
         """Global state vectors, shape (B, state_dim), float32: positions, velocities, goal positions and
         velocities of all agents, formation error, fitted Theta (row-major), scenario parameters, time fraction."""
         B = state.batch_size
-        theta = self.affine.fit(state.pos)[0].reshape(B, -1)
-        nd2 = 2 * self.n * self.d
+        pos = state.pos.reshape(B, -1)
         parts = [
-            state.pos.reshape(B, -1),
+            pos,
             state.vel.reshape(B, -1),
-            state.ref[:, :nd2],
+            state.ref[:, : 2 * self.n * self.d],
             state.err[:, None],
-            theta,
-            self.scenario.param_vector(state.params),
-            (state.k / self._max_cycles)[:, None],
+            pos @ self._theta_map,
+            state.params["_pvec"],
+            state.k[:, None] * (1.0 / self._max_cycles),
         ]
         out = np.concatenate(parts, axis=1)
-        np.clip(out, self._state_lo64, self._state_hi64, out=out)
+        np.minimum(np.maximum(out, self._state_lo64, out=out), self._state_hi64, out=out)
         return out.astype(np.float32)
 
     # ------------------------------------------------------------------ step
@@ -860,6 +868,11 @@ class Engine:
             goal_distance, time (B,) in m and s; control_effort (B, n_l), |u_i|^2.
         """
         B = state.x.shape[0]
+        if B == 1 and "_M1" in state.params:  # the single-env fast path, in arrays
+            new, obs, rew, term, trunc, inf = self.step1(state, actions)
+            info = {key: np.array([val]) for key, val in inf.items()}
+            assert obs is not None
+            return new, obs[None], np.array([rew]), np.array([term]), np.array([trunc]), info
         a = np.minimum(np.maximum(self.check_actions(actions, B), -1.0), 1.0)
         af = a.reshape(B, -1)
         if state.memory is None:
@@ -887,16 +900,7 @@ class Engine:
         if out[:, cols["guard"]].min() >= 0.0:  # the usual step: inside the world box, no agent fast
             oob = self._false(B)
         else:
-            oob = out[:, cols["box"]].min(axis=1) < 0.0
-            collision |= oob
-        if (self.n_seg or self.n_circ) and out[:, cols["speed"]].min() < 0.0:
-            prev = state.pos
-            if self.n_seg:
-                collision |= geometry.segment_crossings(prev, pos, params["_a"], params["_e"]).any(axis=1)
-            if self.n_circ:
-                cc = geometry.circle_clearance(prev, pos, params["circles"]).min(axis=(1, 2)) - self.agent_radius
-                np.minimum(clear, cc, out=clear)
-                collision |= cc < 0.0
+            oob = self._guarded(out, state.pos, pos, params, clear, collision)
         err = nv[:, -1]
         gd_l = nv[:, kc : kc + nl]
         if self._fused_success:
@@ -932,12 +936,194 @@ class Engine:
             "out_of_bounds": oob,
             "formation_error": err,
             "min_clearance": clear,
-            "goal_distance": None,
+            "goal_distance": nv[:, kc:-1].max(axis=1),
             "control_effort": re[:, nl:],
             "time": k * self.dt,
         }
-        info["goal_distance"] = nv[:, kc:-1].max(axis=1)
         return new, obs, re[:, :nl], terminated, truncated, info
+
+    def _guarded(
+        self, out: Array, prev: Array, pos: Array, params: dict[str, Array], clear: Array, collision: NDArray[np.bool_]
+    ) -> NDArray[np.bool_]:
+        """The rare part of a step whose guard tripped: leaving the world box, and swept (tunnelling) contacts
+        of fast agents from ``prev`` to ``pos`` (B, n, d). Updates ``clear`` and ``collision`` (B,) in place;
+        returns out_of_bounds (B,)."""
+        cols = self._cols
+        oob = out[:, cols["box"]].min(axis=1) < 0.0
+        collision |= oob
+        if (self.n_seg or self.n_circ) and out[:, cols["speed"]].min() < 0.0:
+            if self.n_seg:
+                collision |= geometry.segment_crossings(prev, pos, params["_a"], params["_e"]).any(axis=1)
+            if self.n_circ:
+                cc = geometry.circle_clearance(prev, pos, params["circles"]).min(axis=(1, 2)) - self.agent_radius
+                np.minimum(clear, cc, out=clear)
+                collision |= cc < 0.0
+        return oob
+
+    # ------------------------------------------------------------------ the B = 1 step
+    def _build_fast1(self) -> None:
+        """Static parts of ``step1``'s compiled path (``_kernel.step1``): the feature map z -> Q of the next
+        positions (wall slots left empty) and the kernel's layout vector."""
+        self._fast1 = (
+            _kernel.AVAILABLE and self._fused_success and not self.scenario.moving_goal and self.n <= ALL_PAIRS_UP_TO
+        )  # else step1 takes the batched step
+        if not self._fast1:
+            return
+        n, d, nl, S = self.n, self.d, self.n_l, self.n_seg
+        cols, M = self._cols, self._M
+        Z = M.shape[0]
+        self._q1 = M[:, cols["pos1"]] @ self._G0  # (Z, F)
+        self._paug1 = M[:, cols["paug"]].reshape(Z, n, d + 1)
+        self._one_row = Z - 2  # z = [x, a, mem, ref] and ref ends with (1, k)
+        self._excess = self._g["walls"].start + d * np.arange(n * S)  # Q's wall rows: (excess, across)
+        ks = self.obs_dim - self.L1 - 1
+        if self._const_sense is not None:
+            mode, self._sense_c = _kernel.SENSE_CONST, np.tile(self._const_sense, (nl, 1))
+        else:
+            walls_only = S and not self.n_circ and d == 2
+            mode, self._sense_c = (_kernel.SENSE_WALLS if walls_only else _kernel.SENSE_GIVEN), np.zeros((nl, ks))
+        self._sense_mode = mode
+        layout = {
+            "kc": self._kc,
+            "kd": self._kd,
+            "d": d,
+            "nl": nl,
+            "n_seg": S,
+            "n_rays": self.n_rays,
+            "L1": self.L1,
+            "obs_dim": self.obs_dim,
+            "guard0": cols["guard"].start,
+            "guard1": cols["guard"].stop,
+            "obs0": cols["obs"].start,
+            "laug0": cols["laug"].start,
+            "q1": self._q1.shape[1],
+            "walls0": self._g["walls"].start,
+            "sense_mode": mode,
+        }
+        self._layout1 = np.array([layout[k] for k in _kernel.LAYOUT], dtype=np.int64)
+        self._lin_lo1 = np.tile(self._lin_lo, nl)
+        self._lin_hi1 = np.tile(self._lin_hi, nl)
+        self._rew_tail = np.ascontiguousarray(self._w_rew[3:])
+        self._rew_head = [float(w) for w in self._w_rew[:3, 0]]  # success, collision, formation (all leaders)
+        self._no_rays = np.zeros((d + 1, 0))
+        self._no_mem = np.zeros(0)
+
+    def _fold_episode(self, params: dict[str, Array]) -> None:
+        """``params["_M1"]`` (1, Z, C1): the episode's feature map at B = 1, so that ``step1`` needs one matmul
+        for all its geometry. From z, its columns give Q (circle centres and static goals included, wall
+        excess left 0), then per agent and wall (along - length, -along, 0) as a (3, n S) block whose
+        column max is the excess along the wall."""
+        q = self._q1.copy()
+        q[self._one_row] += params["_off"][0]
+        blocks = [q]
+        S = self.n_seg
+        if S:
+            Z = q.shape[0]
+            wf = self._paug1 @ params["_W"][0]  # (Z, n, 3 S): across, along - length, -along
+            q[:, self._excess + 1] = wf[:, :, :S].reshape(Z, -1)
+            ex = np.zeros((Z, 3, self.n * S))
+            ex[:, 0] = wf[:, :, S : 2 * S].reshape(Z, -1)
+            ex[:, 1] = wf[:, :, 2 * S :].reshape(Z, -1)
+            blocks.append(ex.reshape(Z, -1))
+        m1 = np.concatenate(blocks, axis=1)[None]
+        m1.setflags(write=False)
+        params["_M1"] = m1
+
+    def step1(
+        self, state: EngineState, actions: ArrayLike, observe: bool = True
+    ) -> tuple[EngineState, NDArray[np.float32] | None, list[float], bool, bool, dict[str, Any]]:
+        """One sample of a single env (B = 1), with Python scalars out: what a single-env wrapper needs.
+
+        Args:
+            state: a B = 1 state (not modified). actions: leader actions, shape (n_l, p) or (1, n_l, p).
+        Returns:
+            (state', obs (n_l, obs_dim) float32, rewards (n_l floats), terminated, truncated, info) with
+            info's values Python scalars (``control_effort`` a list over leaders), as in ``step``; obs is None
+            when ``observe`` is False (a caller that observes ``global_state`` only skips the sensing).
+
+        States from ``reset(rng, 1)`` of static-goal scenarios (n <= ``ALL_PAIRS_UP_TO``, the default success
+        test) carry the episode's folded feature map (``_fold_episode``) and take a fast path: the same maths
+        in about 30 numpy calls, since at this size numpy's ~1 us per call is the whole cost. It equals the
+        batched step up to rounding (tests). Other states go through ``step``.
+        """
+        params = state.params
+        m1 = params.get("_M1")
+        a = np.asarray(actions, dtype=np.float64)
+        if m1 is None or state.x.shape[0] != 1:
+            new, obs, rew, term, trunc, arrays = self.step(state, a.reshape(1, self.n_l, self.p))
+            inf1: dict[str, Any] = {key: val[0].item() for key, val in arrays.items() if key != "control_effort"}
+            inf1["control_effort"] = arrays["control_effort"][0].tolist()
+            return new, obs[0], rew[0].tolist(), bool(term[0]), bool(trunc[0]), inf1
+        flat = a.reshape(-1)
+        if flat.size != self._rew_tail.shape[0] - 2 * self.n_l:
+            self.check_actions(a if a.ndim == 3 else a[None], 1)  # raises on the shape
+        cols, nl, kc, n, d = self._cols, self.n_l, self._kc, self.n, self.d
+        rays = params["_R"][0] if self._sense_mode == _kernel.SENSE_WALLS else self._no_rays
+        out1, obs, nv, re, sc3 = _kernel.step1(
+            state.x.reshape(-1),
+            flat,
+            self._no_mem if state.memory is None else state.memory.reshape(-1),
+            state.ref[0],
+            self._M,
+            params["_M1"][0],
+            params["_thr"][0],
+            rays,
+            self._sense_c,
+            state.goal_dist[0],
+            self._rew_tail,
+            self._lin_lo1,
+            self._lin_hi1,
+            self._err_hi,
+            self._layout1,
+        )
+        if sc3[3]:
+            self.check_actions(a if a.ndim == 3 else a[None], 1)  # raises, naming the leader
+        out = out1[None]
+        if observe and self._sense_mode == _kernel.SENSE_GIVEN:  # circles or 3D: the batched sensing
+            obs[:, self.L1 + 1 :] = self._sense(out[:, cols["laug"]].reshape(1, nl, d + 1), params)[0]
+        clear_f, worst, gmin, _ = sc3.tolist()
+        collision_f = clear_f < 0.0
+        pos = out[:, cols["pos"]].reshape(1, n, d)
+        oob_f = False
+        if gmin < 0.0:  # left the world box, or an agent was fast: swept checks
+            clear, collision = np.array([clear_f]), np.array([collision_f])
+            oob_f = bool(self._guarded(out, state.pos, pos, params, clear, collision)[0])
+            clear_f, collision_f = float(clear[0]), bool(collision[0])
+        nvl = nv.tolist()
+        err = nvl[-1]
+        sc = self.scenario
+        ok = worst < 0.0 and not collision_f
+        streak_i = int(ok) if sc.hold_steps == 1 else (int(state.streak[0]) + 1) * ok
+        success_f = streak_i >= sc.hold_steps
+        term_f = collision_f or (success_f and sc.terminate_on_success)
+        k_i = int(state.k[0]) + 1
+        ws, wc, wf = self._rew_head
+        head = success_f * ws + collision_f * wc + err * wf
+        rel = re.tolist()
+        new = EngineState(
+            out[:, cols["x"]].reshape(1, n, self.q),
+            pos,
+            out[:, cols["vel"]].reshape(1, n, d),
+            out[:, cols["mem"]].reshape(1, self.n_f, self.p) if self.mem_dim else None,
+            np.array([k_i]),
+            out[:, cols["ref"]],
+            nv[None, kc : kc + nl],
+            nv[None, -1],
+            np.array([streak_i]),
+            params,
+        )
+        info = {
+            "success": success_f,
+            "collision": collision_f,
+            "out_of_bounds": oob_f,
+            "formation_error": err,
+            "min_clearance": clear_f,
+            "goal_distance": max(nvl[kc:-1]),
+            "control_effort": rel[nl:],
+            "time": k_i * self.dt,
+        }
+        trunc_f = k_i >= self._max_cycles and not term_f
+        return new, obs if observe else None, [r + head for r in rel[:nl]], term_f, trunc_f, info
 
     # ------------------------------------------------------------------ helpers
     def affine_targets(self, state: EngineState) -> Array:
@@ -969,7 +1155,8 @@ class Engine:
     def concat(states: list[EngineState]) -> EngineState:
         """Join states along the batch dim (e.g. B = 1 resets into one batch), in order."""
         first = states[0]
-        params = {kk: np.concatenate([s.params[kk] for s in states]) for kk in first.params}
+        keys = [kk for kk in first.params if kk != "_M1" or len(states) == 1]  # _M1: the B = 1 step's only
+        params = {kk: np.concatenate([s.params[kk] for s in states]) for kk in keys}
         for arr in params.values():
             arr.setflags(write=False)
 

@@ -16,8 +16,6 @@ from .engine import Engine, EngineState
 
 __all__ = ["FormationEnv"]
 
-_INFO_SCALARS = ("success", "collision", "out_of_bounds", "formation_error", "min_clearance", "goal_distance", "time")
-
 
 class FormationEnv(ParallelEnv, EzPickle):
     """Leader-follower affine formation control (Zhao & Zelazo's stress-matrix laws, sampled in discrete time).
@@ -149,6 +147,7 @@ class FormationEnv(ParallelEnv, EzPickle):
         self._index = list(enumerate(self.possible_agents))
         self._obs_space = spaces.Box(eng.obs_low, eng.obs_high, dtype=np.float32)
         self._act_space = spaces.Box(-1.0, 1.0, (eng.p,), dtype=np.float32)
+        self._act_shape = (eng.n_l, eng.p)
         self.observation_spaces = dict.fromkeys(self.possible_agents, self._obs_space)
         self.action_spaces = dict.fromkeys(self.possible_agents, self._act_space)
         self.state_space = spaces.Box(eng.state_low, eng.state_high, dtype=np.float32)
@@ -206,27 +205,26 @@ class FormationEnv(ParallelEnv, EzPickle):
                 raise FormationError("the episode is over: call reset() before step()")
             return {}, {}, {}, {}, {}
         try:
-            a = np.array([actions[ag] for ag in self.possible_agents], dtype=np.float64)
+            acts = [actions[ag] for ag in self.possible_agents]
         except KeyError as exc:
             raise ValueError(f"step() needs an action for every live agent; missing {exc.args[0]!r}") from None
+        try:
+            a = np.array(acts, dtype=np.float64)
         except ValueError as exc:
             raise ValueError(f"actions must be arrays of shape {self._act_space.shape}: {exc}") from None
-        if a.shape != (self.engine.n_l, self.engine.p):
+        if a.shape != self._act_shape:
             raise ValueError(f"each action must have shape {self._act_space.shape}, got actions of shape {a.shape[1:]}")
-        state, obs, rew, term, trunc, info = self.engine.step(self._state, a[None])  # type: ignore[arg-type]
+        state, o, rew, t, tr, info = self.engine.step1(self._state, a)  # type: ignore[arg-type]
+        assert o is not None
         self._state = state
-        o = obs[0]
         agents = self.possible_agents
-        t, tr = bool(term[0]), bool(trunc[0])
-        common = {key: info[key].tolist()[0] for key in _INFO_SCALARS}
-        effort = info["control_effort"][0].tolist()
-        infos = {ag: {**common, "control_effort": effort[i]} for i, ag in self._index}
+        effort = info.pop("control_effort")
         out = (
             {ag: o[i] for i, ag in self._index},
-            dict(zip(agents, rew[0].tolist(), strict=True)),
+            dict(zip(agents, rew, strict=True)),
             dict.fromkeys(agents, t),
             dict.fromkeys(agents, tr),
-            infos,
+            {ag: {**info, "control_effort": effort[i]} for i, ag in self._index},
         )
         if t or tr:
             self.agents = []

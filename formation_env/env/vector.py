@@ -63,29 +63,8 @@ _DONE_INFO = ("success", "collision", "out_of_bounds", "formation_error", "goal_
 
 
 def stack_states(states: Sequence[EngineState]) -> EngineState:
-    """Concatenate engine states along the batch dim (params stay read-only)."""
-    first = states[0]
-    params = {}
-    for key in first.params:
-        arr = np.concatenate([s.params[key] for s in states])
-        arr.setflags(write=False)
-        params[key] = arr
-
-    def cat(field: str) -> Any:
-        return np.concatenate([getattr(s, field) for s in states])
-
-    return EngineState(
-        x=cat("x"),
-        pos=cat("pos"),
-        vel=cat("vel"),
-        memory=None if first.memory is None else cat("memory"),
-        k=cat("k"),
-        ref=cat("ref"),
-        goal_dist=cat("goal_dist"),
-        err=cat("err"),
-        streak=cat("streak"),
-        params=params,
-    )
+    """Concatenate engine states along the batch dim (params stay read-only): ``Engine.concat``."""
+    return Engine.concat(list(states))
 
 
 def reset_batch(engine: Engine, rngs: Sequence[np.random.Generator]) -> EngineState:

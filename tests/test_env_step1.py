@@ -1,0 +1,110 @@
+"""The single-env step ``Engine.step1`` (compiled fast path) against the batched numpy step, its reference."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from formation_env.core.errors import ControlDimension
+from formation_env.env import _kernel
+from formation_env.env.engine import Engine, EngineState, offered_combinations
+
+
+def _batched(state: EngineState) -> EngineState:
+    """The same state without the B = 1 folded map, so that ``step`` takes the batched code."""
+    return state._replace(params={k: v for k, v in state.params.items() if k != "_M1"})
+
+
+def _compare(eng: Engine, seed: int, steps: int) -> int:
+    """Step ``step1`` and the batched step side by side with the same actions (some far out of range, so that
+    agents go fast and leave the box); return how many steps took the fast path."""
+    rng = np.random.default_rng(seed)
+    fast = eng.reset(np.random.default_rng(seed), 1)
+    ref = _batched(fast)
+    used = 0
+    for t in range(steps):
+        scale = 30.0 if t % 7 == 0 else 1.2
+        a = rng.uniform(-scale, scale, (1, eng.n_l, eng.p))
+        used += "_M1" in fast.params
+        s1, o1, r1, te1, tr1, i1 = eng.step1(fast, a[0])
+        s2, o2, r2, te2, tr2, i2 = eng.step(ref, a)
+        np.testing.assert_allclose(o1, o2[0], rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(r1, r2[0], rtol=1e-9, atol=1e-9)
+        assert (te1, tr1) == (bool(te2[0]), bool(tr2[0]))
+        assert set(i1) == set(i2)
+        for key, val in i2.items():
+            np.testing.assert_allclose(i1[key], val[0], rtol=1e-9, atol=1e-9, err_msg=key)
+            assert np.asarray(i1[key]).dtype.kind == val.dtype.kind or key in ("time",), key
+        for f in ("x", "pos", "vel", "memory", "k", "ref", "goal_dist", "err", "streak"):
+            if getattr(s2, f) is not None:
+                np.testing.assert_allclose(getattr(s1, f), getattr(s2, f), rtol=1e-9, atol=1e-9, err_msg=f)
+                assert getattr(s1, f).shape == getattr(s2, f).shape, f
+        fast, ref = s1, s2
+        if te1 or tr1:
+            fast = eng.reset(rng, 1)
+            ref = _batched(fast)
+    return used
+
+
+@pytest.mark.parametrize(("scenario", "dynamics", "law"), offered_combinations())
+def test_step1_equals_the_batched_step(scenario, dynamics, law):
+    eng = Engine(scenario, dynamics, law, max_cycles=40)
+    used = _compare(eng, seed=3, steps=90)
+    expect_fast = _kernel.AVAILABLE and not eng.scenario.moving_goal
+    assert eng._fast1 == expect_fast
+    assert (used == 90) == expect_fast and (used == 0) == (not expect_fast)
+
+
+def test_step1_without_the_kernel_takes_the_batched_step(monkeypatch):
+    monkeypatch.setattr(_kernel, "AVAILABLE", False)
+    eng = Engine("narrow_passage", max_cycles=30)
+    assert not eng._fast1
+    assert "_M1" not in eng.reset(np.random.default_rng(0), 1).params
+    assert _compare(eng, seed=1, steps=40) == 0
+
+
+def test_step_at_b1_uses_step1_and_matches_its_arrays():
+    eng = Engine("narrow_passage")
+    s = eng.reset(np.random.default_rng(2), 1)
+    a = np.full((1, eng.n_l, eng.p), 0.3)
+    new, obs, rew, term, trunc, info = eng.step(s, a)
+    new1, obs1, *_ = eng.step1(s, a[0])
+    assert obs.shape == (1, eng.n_l, eng.obs_dim) and obs.dtype == np.float32
+    np.testing.assert_array_equal(obs[0], obs1)
+    assert rew.shape == (1, eng.n_l) and term.shape == trunc.shape == (1,)
+    assert info["control_effort"].shape == (1, eng.n_l) and info["success"].dtype == bool
+    np.testing.assert_array_equal(new.x, new1.x)
+
+
+def test_step1_without_observation_skips_only_the_observation():
+    eng = Engine("obstacle_field", "single_integrator", "stationary")
+    s = eng.reset(np.random.default_rng(4), 1)
+    a = np.full((eng.n_l, eng.p), 0.5)
+    full = eng.step1(s, a)
+    bare = eng.step1(s, a, observe=False)
+    assert bare[1] is None and full[1] is not None
+    assert full[2:5] == bare[2:5] and full[5] == bare[5]
+    np.testing.assert_array_equal(full[0].x, bare[0].x)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_step1_refuses_nan_and_inf_naming_the_leader(bad):
+    eng = Engine("narrow_passage")
+    s = eng.reset(np.random.default_rng(0), 1)
+    before = s.x.copy()
+    a = np.zeros((eng.n_l, eng.p))
+    a[1, 0] = bad
+    with pytest.raises(ValueError, match="leader_1"):
+        eng.step1(s, a)
+    np.testing.assert_array_equal(s.x, before)
+
+
+def test_step1_clips_huge_finite_actions_and_checks_the_shape():
+    eng = Engine("hold", "single_integrator", "stationary")
+    s = eng.reset(np.random.default_rng(0), 1)
+    huge = eng.step1(s, np.full((eng.n_l, eng.p), 1e300))
+    one = eng.step1(s, np.ones((eng.n_l, eng.p)))
+    np.testing.assert_array_equal(huge[0].x, one[0].x)
+    assert huge[5]["control_effort"] == one[5]["control_effort"]
+    with pytest.raises(ControlDimension, match="shape"):
+        eng.step1(s, np.zeros((eng.n_l + 1, eng.p)))

@@ -108,3 +108,38 @@ def test_step1_clips_huge_finite_actions_and_checks_the_shape():
     assert huge[5]["control_effort"] == one[5]["control_effort"]
     with pytest.raises(ControlDimension, match="shape"):
         eng.step1(s, np.zeros((eng.n_l + 1, eng.p)))
+
+
+@pytest.mark.parametrize(("scenario", "dynamics", "law"), offered_combinations())
+def test_compiled_batch_step_equals_the_numpy_step(scenario, dynamics, law):
+    """``_step_batch`` (compiled per env) against the folded numpy step, B = 4, through resets, fast agents and
+    agents leaving the box."""
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    eng = Engine(scenario, dynamics, law, max_cycles=40)
+    rng = np.random.default_rng(1)
+    fast = ref = eng.reset(np.random.default_rng(5), 4)
+    guarded = 0
+    for t in range(90):
+        scale = 30.0 if t % 7 == 0 else 1.2
+        a = rng.uniform(-scale, scale, (4, eng.n_l, eng.p))
+        eng._kbatch = True
+        s1, o1, r1, te1, tr1, i1 = eng.step(fast, a)
+        eng._kbatch = False
+        s2, o2, r2, te2, tr2, i2 = eng.step(ref, a)
+        np.testing.assert_allclose(o1, o2, rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(r1, r2, rtol=1e-9, atol=1e-9)
+        np.testing.assert_array_equal(te1, te2)
+        np.testing.assert_array_equal(tr1, tr2)
+        for key, val in i2.items():
+            np.testing.assert_allclose(i1[key], val, rtol=1e-9, atol=1e-9, err_msg=key)
+            assert i1[key].dtype.kind == val.dtype.kind, key
+        for f in ("x", "pos", "vel", "memory", "k", "ref", "goal_dist", "err", "streak"):
+            if getattr(s2, f) is not None:
+                np.testing.assert_allclose(getattr(s1, f), getattr(s2, f), rtol=1e-9, atol=1e-9, err_msg=f)
+        guarded += bool(i2["out_of_bounds"].any() or i2["collision"].any())
+        fast, ref = s1, s2
+        if (te1 | tr1).any():
+            fast = ref = eng.reset(rng, 4)
+    if scenario in ("narrow_passage", "obstacle_field"):
+        assert guarded > 0  # contacts or the world box were exercised

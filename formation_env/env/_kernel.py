@@ -187,3 +187,198 @@ def step1(
             for j in range(w_tail.shape[1]):
                 rew[j] += f * w_tail[i, j]
     return out, obs, nv, rew, np.array([clear, worst, gmin, 0.0])
+
+
+@njit(cache=True)
+def batch(
+    pos: np.ndarray,
+    prev: np.ndarray,
+    vel: np.ndarray,
+    ref: np.ndarray,
+    a2: np.ndarray,
+    gprev: np.ndarray,
+    circles: np.ndarray,
+    walls: np.ndarray,
+    rays: np.ndarray,
+    thr: np.ndarray,
+    pairs: np.ndarray,
+    leaders: np.ndarray,
+    perm: np.ndarray,
+    pinv: np.ndarray,
+    hfit: np.ndarray,
+    box: np.ndarray,
+    fast: float,
+    inv_cycles: float,
+    lin_lo: np.ndarray,
+    lin_hi: np.ndarray,
+    err_hi: float,
+    w_tail: np.ndarray,
+    sense_in: np.ndarray,
+    mode: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Everything of a batched step that is not linear in the state, per env, from the new positions.
+
+    The same quantities as ``Engine.step``'s numpy code (the reference, compared in tests), computed
+    directly from positions instead of through the folded feature matrices.
+
+    Args:
+        pos, prev, vel: new positions, previous positions, new velocities, shape (B, n, d) (m, m/s).
+        ref: the new exogenous row [goal (n d), goal velocity (n d), 1, k], shape (B, 2 n d + 2).
+        a2: squared clipped actions (B, n_l p); gprev: goal distances before the step (B, n_l), m.
+        circles (B, C, d + 1); walls (B, d + 1, 3 S): [p, 1] -> (across, along - length, -along);
+        rays (B, d + 1, 2 S R): a leader's [p, 1] -> (T, AH); thr (B, Kc + n + 1) thresholds (m).
+        pairs (P, 2) agent pairs checked for contact; leaders (n_l,); perm (n,): leaders first.
+        pinv (d + 1, n), hfit (n, d + 1): the affine fit [r, 1]^+ and [r, 1].
+        box (2, d): world box low and high; fast: per-axis displacement (m) above which an agent is fast.
+        inv_cycles: 1 / max_cycles; lin_lo, lin_hi (n_l, L1); err_hi; w_tail: reward rows for
+        [a2, gprev, goal distances]; sense_in (B, n_l, ks) used unless ``mode`` is SENSE_WALLS.
+    Returns:
+        obs (B, n_l, obs_dim) float32; dist (B, n_l + 4): leader goal distances, formation error, largest
+        goal distance, min clearance, max of the success margins (nv - thr)[Kc:]; flags (B, 2): out of the
+        box, some agent fast; rew (B, 2 n_l): the reward's and effort's parts linear in [a2, gprev, dist].
+    """
+    B, n, d = pos.shape
+    nl, L1 = lin_lo.shape
+    od = L1 + 1 + sense_in.shape[2]
+    C = circles.shape[1]
+    S = walls.shape[2] // 3
+    R = rays.shape[2] // (2 * S) if S > 0 else 0
+    P = pairs.shape[0]
+    kc = P + n * C + n * S
+    nd = n * d
+    sqn = np.sqrt(float(n))
+    obs = np.empty((B, nl, od), dtype=np.float32)
+    dist = np.empty((B, nl + 4))
+    flags = np.zeros((B, 2), dtype=np.bool_)
+    rew = np.zeros((B, w_tail.shape[1]))
+    coef = np.empty((d + 1, d))
+    lin = np.empty(L1)
+    for b in range(B):
+        p = pos[b]
+        clear = np.inf
+        for k in range(P):  # agent pairs
+            i, j = pairs[k, 0], pairs[k, 1]
+            acc = 0.0
+            for c in range(d):
+                v = p[i, c] - p[j, c]
+                acc += v * v
+            v = np.sqrt(acc) - thr[b, k]
+            if v < clear:
+                clear = v
+        for i in range(n):
+            for j in range(C):  # agent-circle
+                acc = 0.0
+                for c in range(d):
+                    v = p[i, c] - circles[b, j, c]
+                    acc += v * v
+                v = np.sqrt(acc) - thr[b, P + i * C + j]
+                if v < clear:
+                    clear = v
+            for s in range(S):  # agent-wall: distance across, and excess along the wall
+                across = walls[b, d, s]
+                along = walls[b, d, S + s]
+                back = walls[b, d, 2 * S + s]
+                for c in range(d):
+                    across += p[i, c] * walls[b, c, s]
+                    along += p[i, c] * walls[b, c, S + s]
+                    back += p[i, c] * walls[b, c, 2 * S + s]
+                ex = max(along, back, 0.0)
+                v = np.sqrt(across * across + ex * ex) - thr[b, P + n * C + i * S + s]
+                if v < clear:
+                    clear = v
+        worst = -np.inf
+        gmax = 0.0
+        for k in range(n):  # goal distances, leaders first
+            i = perm[k]
+            acc = 0.0
+            for c in range(d):
+                v = ref[b, i * d + c] - p[i, c]
+                acc += v * v
+            g = np.sqrt(acc)
+            if g > gmax:
+                gmax = g
+            if k < nl:
+                dist[b, k] = g
+            v = g - thr[b, kc + k]
+            if v > worst:
+                worst = v
+        for r in range(d + 1):  # affine fit, then the RMS residual
+            for c in range(d):
+                acc = 0.0
+                for m in range(n):
+                    acc += pinv[r, m] * p[m, c]
+                coef[r, c] = acc
+        acc = 0.0
+        for m in range(n):
+            for c in range(d):
+                v = p[m, c]
+                for r in range(d + 1):
+                    v -= hfit[m, r] * coef[r, c]
+                acc += v * v
+        err = np.sqrt(acc) / sqn
+        v = err - thr[b, kc + n]
+        if v > worst:
+            worst = v
+        dist[b, nl] = err
+        dist[b, nl + 1] = gmax
+        dist[b, nl + 2] = clear
+        dist[b, nl + 3] = worst
+        for i in range(n):  # world box and fast agents
+            for c in range(d):
+                if p[i, c] < box[0, c] or p[i, c] > box[1, c]:
+                    flags[b, 0] = True
+                if abs(p[i, c] - prev[b, i, c]) > fast:
+                    flags[b, 1] = True
+        tk = ref[b, 2 * nd + 1] * inv_cycles
+        for li in range(nl):  # observations (layout: Engine.obs_blocks)
+            a = leaders[li]
+            o = 0
+            for c in range(d):
+                lin[o + c] = p[a, c]
+                lin[o + d + c] = vel[b, a, c]
+            o += 2 * d
+            for lj in range(nl):
+                if lj != li:
+                    for c in range(d):
+                        lin[o + c] = p[leaders[lj], c] - p[a, c]
+                    o += d
+            for c in range(d):
+                lin[o + c] = ref[b, a * d + c] - p[a, c]
+                lin[o + d + c] = ref[b, nd + a * d + c]
+            o += 2 * d
+            for i_ in range(d):  # Theta[i_, j_] = sum_m pinv[j_, m] p_m[i_]: row i_ of Theta is column i_ of coef
+                for j_ in range(d):
+                    lin[o + i_ * d + j_] = coef[j_, i_]
+            o += d * d
+            lin[o] = tk
+            for j in range(L1):
+                v = lin[j]
+                if v < lin_lo[li, j]:
+                    v = lin_lo[li, j]
+                if v > lin_hi[li, j]:
+                    v = lin_hi[li, j]
+                obs[b, li, j] = v
+            obs[b, li, L1] = err if err < err_hi else err_hi
+            if mode == 2:  # 2D rays: T / sensor range of the first hit inside a wall, else 1
+                sr = S * R
+                for r in range(R):
+                    best = 1.0
+                    for s in range(S):
+                        t = rays[b, d, s * R + r]
+                        h = rays[b, d, sr + s * R + r]
+                        for c in range(d):
+                            t += p[a, c] * rays[b, c, s * R + r]
+                            h += p[a, c] * rays[b, c, sr + s * R + r]
+                        if t >= 0.0 and abs(h) <= 1.0 and t < best:
+                            best = t
+                    obs[b, li, L1 + 1 + r] = best
+            else:
+                for j in range(od - L1 - 1):
+                    obs[b, li, L1 + 1 + j] = sense_in[b, li, j]
+        na = a2.shape[1]
+        for i in range(na + 2 * nl):  # reward tail: [a2, gprev, goal distances] @ w_tail
+            f = a2[b, i] if i < na else (gprev[b, i - na] if i < na + nl else dist[b, i - na - nl])
+            if f != 0.0:
+                for j in range(w_tail.shape[1]):
+                    rew[b, j] += f * w_tail[i, j]
+    return obs, dist, flags, rew

@@ -414,6 +414,7 @@ class Engine:
         self._build_geometry_template()
         self._build_bounds()
         self._build_fast1()
+        self._build_kernel_batch()
 
     # ------------------------------------------------------------------ construction
     @property
@@ -525,7 +526,7 @@ class Engine:
 
         Rows of Q (each a d-vector whose norm matters): agent pairs p_i - p_j; agent-circle p_i - c_j;
         agent-wall (excess along the wall, distance across it) (2D, filled in by ``_features``);
-        goal deltas x_i* - p_i (leaders first); affine residual rows / sqrt(n). ``_group`` sums the
+        goal deltas x_i* - p_i (leaders first); affine residual rows / sqrt(n). ``_norms`` sums the
         squares per row (all residual rows into one): [contact distances, goal distances, formation error].
         Walls and rays have per-episode coefficients, applied per agent to [p_i, 1] (see ``_episode_geometry``).
         """
@@ -562,10 +563,6 @@ class Engine:
             for j in range(n):
                 G0[j * d + comp, (r0["res"] + i) * d + comp] = pres[i, j]
         self._G0 = G0
-        group = np.zeros((nrow * d, kd + 1))
-        group[np.arange(kd * d), np.repeat(np.arange(kd), d)] = 1.0
-        group[kd * d :, kd] = 1.0
-        self._group = group
         sc = self.scenario
         self._thr0 = np.concatenate(
             [
@@ -771,8 +768,15 @@ class Engine:
 
     def _norms(self, geo: Array) -> Array:
         """[contact distances (Kc), goal distances (n, leaders first), formation error], shape (B, Kc + n + 1)."""
-        q = geo
-        return np.sqrt((q * q) @ self._group)
+        sq = geo * geo
+        kd, d = self._kd, self.d
+        out = np.empty((sq.shape[0], kd + 1))
+        head = out[:, :kd]
+        np.add(sq[:, 0 : kd * d : d], sq[:, 1 : kd * d : d], out=head)  # per row, sum over its d components
+        for c in range(2, d):
+            head += sq[:, c : kd * d : d]
+        out[:, kd] = sq[:, kd * d :].sum(axis=1)  # the residual rows together
+        return np.sqrt(out, out=out)
 
     def _sense(self, laug: Array, params: dict[str, Array]) -> Array:
         """Obstacle sensing of every leader from its [p, 1] (B, n_l, d + 1): 2D ray ranges / range, 3D
@@ -873,6 +877,8 @@ class Engine:
             info = {key: np.array([val]) for key, val in inf.items()}
             assert obs is not None
             return new, obs[None], np.array([rew]), np.array([term]), np.array([trunc]), info
+        if self._kbatch:
+            return self._step_batch(state, actions)
         a = np.minimum(np.maximum(self.check_actions(actions, B), -1.0), 1.0)
         af = a.reshape(B, -1)
         if state.memory is None:
@@ -951,14 +957,165 @@ class Engine:
         cols = self._cols
         oob = out[:, cols["box"]].min(axis=1) < 0.0
         collision |= oob
-        if (self.n_seg or self.n_circ) and out[:, cols["speed"]].min() < 0.0:
-            if self.n_seg:
-                collision |= geometry.segment_crossings(prev, pos, params["_a"], params["_e"]).any(axis=1)
-            if self.n_circ:
-                cc = geometry.circle_clearance(prev, pos, params["circles"]).min(axis=(1, 2)) - self.agent_radius
-                np.minimum(clear, cc, out=clear)
-                collision |= cc < 0.0
+        if out[:, cols["speed"]].min() < 0.0:
+            self._swept(prev, pos, params, clear, collision)
         return oob
+
+    def _swept(
+        self, prev: Array, pos: Array, params: dict[str, Array], clear: Array, collision: NDArray[np.bool_]
+    ) -> None:
+        """Swept contacts of the motions ``prev`` -> ``pos`` (B, n, d) with walls and circles (so that a fast
+        agent cannot tunnel); updates ``clear`` and ``collision`` (B,) in place."""
+        if self.n_seg:
+            collision |= geometry.segment_crossings(prev, pos, params["_a"], params["_e"]).any(axis=1)
+        if self.n_circ:
+            cc = geometry.circle_clearance(prev, pos, params["circles"]).min(axis=(1, 2)) - self.agent_radius
+            np.minimum(clear, cc, out=clear)
+            collision |= cc < 0.0
+
+    # ------------------------------------------------------------------ the batched compiled step
+    def _build_kernel_batch(self) -> None:
+        """Constants of ``_step_batch`` (``_kernel.batch``): the step's linear part [x', mem', pos', vel'] only."""
+        self._kbatch = _kernel.AVAILABLE
+        if not self._kbatch:
+            return
+        n, d, nl, cols = self.n, self.d, self.n_l, self._cols
+        names = ("x", "mem", "pos", "vel")
+        mk = np.concatenate([self._M[:, cols[k]] for k in names], axis=1)
+        zc = self.n * self.q + nl * self.p + self.mem_dim
+        self._k_ref = bool(np.any(mk[zc:]))  # the exogenous row ref enters x' (never for the offered laws)
+        self._Mk = np.ascontiguousarray(mk if self._k_ref else mk[:zc])
+        self._kc_cols: dict[str, slice] = {}
+        c = 0
+        for k in names:
+            w = cols[k].stop - cols[k].start
+            self._kc_cols[k] = slice(c, c + w)
+            c += w
+        self._hfit = np.hstack([self.fw.positions, np.ones((n, 1))])
+        self._box = np.ascontiguousarray(np.stack(self.bounds).astype(np.float64))
+        self._lin_lo2 = np.ascontiguousarray(np.tile(self._lin_lo, (nl, 1)))
+        self._lin_hi2 = np.ascontiguousarray(np.tile(self._lin_hi, (nl, 1)))
+        self._w_tail = np.ascontiguousarray(self._w_rew[3:])
+        self._w_head = [float(w) for w in self._w_rew[:3, 0]]  # success, collision, formation (all leaders)
+        ks = self.obs_dim - self.L1 - 1
+        if self._const_sense is not None:
+            self._bmode = _kernel.SENSE_CONST
+        elif self.n_seg and not self.n_circ and d == 2:
+            self._bmode = _kernel.SENSE_WALLS
+        else:
+            self._bmode = _kernel.SENSE_GIVEN
+        self._sense_cache: dict[int, Array] = {}
+        self._ks = ks
+        self._no_walls = np.zeros((1, d + 1, 0))
+
+    def _sense_fill(self, B: int) -> Array:
+        """A read-only (B, n_l, ks) array of the constant sensing (no obstacles), or a (1, n_l, ks) dummy."""
+        key = B if self._bmode == _kernel.SENSE_CONST else 0
+        arr = self._sense_cache.get(key)
+        if arr is None:
+            shape = (max(key, 1), self.n_l, self._ks)
+            arr = np.zeros(shape) if self._const_sense is None else np.broadcast_to(self._const_sense, shape).copy()
+            arr.setflags(write=False)
+            self._sense_cache[key] = arr
+        return arr
+
+    def _step_batch(
+        self, state: EngineState, actions: ArrayLike
+    ) -> tuple[EngineState, NDArray[np.float32], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
+        """``step`` with the nonlinear part compiled (``_kernel.batch``): a small matmul for [x', mem', pos',
+        vel'], then per env features, contacts, sensing, observations and the reward's linear part from the new
+        positions. Equal to the numpy step up to rounding (tests)."""
+        B, n, d, nl = state.x.shape[0], self.n, self.d, self.n_l
+        a = np.minimum(np.maximum(self.check_actions(actions, B), -1.0), 1.0)
+        af = a.reshape(B, -1)
+        parts = [state.x.reshape(B, -1), af] + ([] if state.memory is None else [state.memory.reshape(B, -1)])
+        out = np.concatenate(parts + [state.ref] * self._k_ref, axis=1) @ self._Mk
+        kcol, params, sc = self._kc_cols, state.params, self.scenario
+        k = state.k + 1
+        if sc.moving_goal:
+            ref = self._ref(params, k)
+        else:
+            ref = state.ref.copy()
+            ref[:, -1] = k
+        pos = np.ascontiguousarray(out[:, kcol["pos"]]).reshape(B, n, d)
+        vel = np.ascontiguousarray(out[:, kcol["vel"]]).reshape(B, n, d)
+        if self._bmode == _kernel.SENSE_GIVEN:
+            laug = np.concatenate([pos[:, self.leaders], np.ones((B, nl, 1))], axis=2)
+            sense = np.ascontiguousarray(self._sense(laug, params))
+        else:
+            sense = self._sense_fill(B)
+        walls = params["_W"] if self.n_seg else self._no_walls
+        obs, dist, flags, re = _kernel.batch(
+            pos,
+            np.ascontiguousarray(state.pos),
+            vel,
+            ref,
+            af * af,
+            np.ascontiguousarray(state.goal_dist),
+            params["circles"],
+            walls,
+            params["_R"] if self._bmode == _kernel.SENSE_WALLS else walls,
+            params["_thr"],
+            self._pairs,
+            self.leaders,
+            self._perm,
+            self.affine._pinv,
+            self._hfit,
+            self._box,
+            self._fast,
+            1.0 / self._max_cycles,
+            self._lin_lo2,
+            self._lin_hi2,
+            self._err_hi,
+            self._w_tail,
+            sense,
+            self._bmode,
+        )
+        err, clear = dist[:, nl], dist[:, nl + 2].copy()
+        collision = clear < 0.0
+        if flags.any():  # left the world box, or an agent was fast: swept checks
+            oob = flags[:, 0].copy()
+            collision |= oob
+            if flags[:, 1].any():
+                self._swept(state.pos, pos, params, clear, collision)
+        else:
+            oob = self._false(B)
+        if self._fused_success:
+            ok = (dist[:, nl + 3] < 0.0) > collision
+        else:
+            ok = sc.is_success(dist[:, nl + 1], err) > collision
+        if sc.hold_steps == 1:
+            streak, success = ok.astype(np.int64), ok
+        else:
+            streak = (state.streak + 1) * ok
+            success = streak >= sc.hold_steps
+        terminated = collision | success if sc.terminate_on_success else collision
+        truncated = (k >= self._max_cycles) > terminated
+        ws, wc, wf = self._w_head
+        rew = re[:, :nl] + (success * ws + collision * wc + err * wf)[:, None]
+        new = EngineState(
+            out[:, kcol["x"]].reshape(B, n, self.q),
+            pos,
+            vel,
+            out[:, kcol["mem"]].reshape(B, self.n_f, self.p) if self.mem_dim else None,
+            k,
+            ref,
+            dist[:, :nl],
+            err,
+            streak,
+            params,
+        )
+        info = {
+            "success": success,
+            "collision": collision,
+            "out_of_bounds": oob,
+            "formation_error": err,
+            "min_clearance": clear,
+            "goal_distance": dist[:, nl + 1],
+            "control_effort": re[:, nl:],
+            "time": k * self.dt,
+        }
+        return new, obs, rew, terminated, truncated, info
 
     # ------------------------------------------------------------------ the B = 1 step
     def _build_fast1(self) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -33,6 +34,9 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+
+#: Largest n for which ``AffineImage.residual`` uses the dense (n, n) projector.
+DENSE_RESIDUAL_UP_TO = 1000
 
 
 def affine_targets(r: ArrayLike, theta: ArrayLike, b: ArrayLike) -> Array:
@@ -190,8 +194,14 @@ class AffineImage:
         if np.linalg.matrix_rank(h) < d + 1:
             raise FormationError(f"the nominal configuration does not affinely span R^{d}")
         self.r = rr
+        self._h = h
         self._pinv = np.linalg.pinv(h)  # (d + 1, n)
-        self._resid = np.eye(n) - h @ self._pinv  # projector onto the complement of the affine image
+
+    @cached_property
+    def _resid(self) -> Array:
+        """I - H H^+, the projector onto the complement of the affine image, shape (n, n) (dense: only
+        for small n; :meth:`residual` of large configurations uses the factored form)."""
+        return np.eye(self.r.shape[0]) - self._h @ self._pinv
 
     def fit(self, x: Array) -> tuple[Array, Array]:
         """Best (Theta, b), shapes (..., d, d) and (..., d)."""
@@ -199,7 +209,10 @@ class AffineImage:
         return np.swapaxes(coef[..., :-1, :], -1, -2), coef[..., -1, :]
 
     def residual(self, x: Array) -> Array:
-        """x minus its best affine image, shape (..., n, d)."""
+        """x minus its best affine image, shape (..., n, d) (above ``DENSE_RESIDUAL_UP_TO`` agents as
+        x - H (H^+ x), never forming the n x n projector)."""
+        if self.r.shape[0] > DENSE_RESIDUAL_UP_TO:
+            return x - np.matmul(self._h, np.matmul(self._pinv, x))
         return np.matmul(self._resid, x)
 
     def error(self, x: Array) -> Array:

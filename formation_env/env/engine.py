@@ -12,6 +12,11 @@ the state are folded at construction into one matrix, so a step is one matmul pl
 the nonlinear parts (norms, obstacle geometry, clipping). The matrix is read off the
 core law by probing ``FollowerLaw.step`` with unit vectors (every law is linear in
 x, u_l and its memory) and is cached per configuration.
+
+Large swarms: the folded matrix grows as n^2, so frameworks of more than ``MAX_AGENTS``
+agents take the sparse path of :mod:`formation_env.env.swarm` instead (a sparse stress
+end to end, the core law stepped directly, O(n + edges) per step), with the same
+observations, rewards and state.
 """
 
 from __future__ import annotations
@@ -21,6 +26,7 @@ import warnings
 from typing import Any, NamedTuple
 
 import numpy as np
+import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
 from formation_env.core.affine import AffineImage
@@ -53,7 +59,8 @@ FOLLOWER_LAWS: tuple[str, ...] = ("stationary", "dynamic", "dynamic_distributed"
 DYNAMICS: tuple[str, ...] = ("single_integrator", "double_integrator")
 #: Reward term names (see ``FormationEnv``'s Rewards section).
 REWARD_TERMS: tuple[str, ...] = ("progress", "distance", "formation", "collision", "effort", "success")
-#: Largest framework the engine takes (its folded matrices grow as n^2).
+#: Largest framework of the folded (dense) step, whose matrices grow as n^2; larger ones take the
+#: sparse path of :mod:`formation_env.env.swarm` (read at construction, so tests may lower it).
 MAX_AGENTS = 256
 #: Above this many agents, agent-agent contacts are checked along the graph's edges only.
 ALL_PAIRS_UP_TO = 64
@@ -101,7 +108,8 @@ def offered_combinations() -> list[tuple[str, str, str]]:
     ]
 
 
-def _designed_stress(fw: Framework) -> Array:
+def _designed_stress(fw: Framework) -> Any:
+    """A stress for ``fw``: sparse (CSR) above ``MAX_AGENTS`` agents when the design is sparse, else dense."""
     complete = len(fw.edges) == fw.n * (fw.n - 1) // 2
     try:
         from formation_env.core.design import design_stress  # lazily: the design module may be absent
@@ -119,24 +127,26 @@ def _designed_stress(fw: Framework) -> Array:
         method = "constructive"
     except FormationError:
         method = "sdp"
-    res = design_stress(fw, method)
-    return np.asarray(res.toarray() if hasattr(res, "toarray") else res, dtype=np.float64)
+    res: Any = design_stress(fw, method)
+    if sp.issparse(res):
+        return sp.csr_matrix(res, dtype=np.float64) if fw.n > MAX_AGENTS else res.toarray()
+    return np.asarray(res, dtype=np.float64)
 
 
 def resolve_framework(
     framework: str | Framework | None, omega: ArrayLike | None, default: str
-) -> tuple[Framework, Array]:
-    """The framework and its checked stress matrix.
+) -> tuple[Framework, Any]:
+    """The framework and its checked stress matrix: dense (n, n), or scipy.sparse CSR above ``MAX_AGENTS``.
 
     Args:
         framework: a name (``NAMED_FRAMEWORKS`` or a function of ``formation_env.core.frameworks``),
             a ``Framework``, or None for ``default``.
-        omega: stress matrix (n, n); None takes the named one, or designs one.
+        omega: stress matrix (n, n), dense or scipy.sparse; None takes the named one, or designs one.
     Raises:
         FormationError: unknown name; StressMatrixError: omega fails ``check_stress``.
     """
     name = default if framework is None else framework
-    om: Array | None = None
+    om: Any = None
     if isinstance(name, str):
         if name in NAMED_FRAMEWORKS:
             fw, om = NAMED_FRAMEWORKS[name]()
@@ -157,9 +167,15 @@ def resolve_framework(
     else:
         raise TypeError(f"framework must be a name or a Framework, got {type(name).__name__}")
     if omega is not None:
-        om = np.asarray(omega, dtype=np.float64)
+        om = omega
     if om is None:
         om = _designed_stress(fw)
+    if fw.n > MAX_AGENTS:  # the sparse path: never densify
+        om = sp.csr_matrix(om, dtype=np.float64)
+    elif sp.issparse(om):
+        om = om.toarray()
+    else:
+        om = np.asarray(om, dtype=np.float64)
     check_stress(om, fw)
     return fw, om
 
@@ -280,9 +296,9 @@ class Engine:
         follower_law: one of ``FOLLOWER_LAWS``; the followers run it inside the engine.
         dt: sampling period T (s).
         max_cycles: samples per episode before truncation.
-        framework: a framework name, a ``Framework`` (2D or 3D, at most ``MAX_AGENTS`` agents), or None
-            for the scenario's default.
-        omega: stress matrix (n, n) for ``framework`` (None: the named one, or designed).
+        framework: a framework name, a ``Framework`` (2D or 3D; above ``MAX_AGENTS`` agents the sparse
+            path of :mod:`formation_env.env.swarm`), or None for the scenario's default.
+        omega: stress matrix (n, n), dense or scipy.sparse, for ``framework`` (None: the named one, or designed).
         law_params: parameters of the law (``make_law``: gain, K, Q, eps, rounds). Defaults differ from
             the core's where the core's are slow or unstable: ``stationary`` without ``gain`` takes
             g = 2 / (T (lambda_min + lambda_max)) of Omega_ff, minimising the spectral radius (Theorem 1);
@@ -338,12 +354,10 @@ class Engine:
         if int(n_rays) != n_rays or n_rays < 1 or int(n_nearest) != n_nearest or n_nearest < 1:
             raise FormationError(f"n_rays and n_nearest must be positive integers, got {n_rays}, {n_nearest}")
         self.scenario_name = scenario
-        if isinstance(framework, Framework) and framework.n > MAX_AGENTS:  # refuse before designing a stress
-            raise FormationError(f"the env takes frameworks of at most {MAX_AGENTS} agents, got {framework.n}")
         fw, om = resolve_framework(framework, omega, CLASSES[scenario].default_framework)
-        if fw.n > MAX_AGENTS:
-            raise FormationError(f"the env takes frameworks of at most {MAX_AGENTS} agents, got {fw.n}")
         self.fw, self.omega = fw, om
+        self.sparse = fw.n > MAX_AGENTS  # the swarm path (module docstring)
+        self._swarm: Any = None
         self.dynamics = dyn = resolve_dynamics(dynamics, fw.d)
         check_combination(follower_law, dyn)
         self.follower_law = follower_law
@@ -355,6 +369,10 @@ class Engine:
         self.scenario: Scenario = REGISTRY[scenario](
             fw, agent_radius=self.agent_radius, horizon=self.dt * self._max_cycles, **scenario_kwargs
         )
+        if self.sparse:
+            from . import swarm
+
+            swarm.fit_world(self.scenario)
         weights = dict(self.scenario.reward_weights)
         for kk, vv in (reward_weights or {}).items():
             if kk not in REWARD_TERMS:
@@ -375,13 +393,17 @@ class Engine:
             else "general"
         )
         lp = dict(law_params or {})
-        if follower_law == "stationary" and "gain" not in lp:  # the gain minimising max |1 - T g lambda_i|
+        if self.sparse:
+            self.law, rho = swarm.make_swarm_law(om, fw.leaders, dyn, follower_law, self.dt, lp)
+        elif follower_law == "stationary" and "gain" not in lp:  # the gain minimising max |1 - T g lambda_i|
             lam = np.linalg.eigvalsh(Partition(om, fw.leaders).omega_ff_dense)
             lp["gain"] = 2.0 / (self.dt * (lam[0] + lam[-1]))
-        if follower_law == "dynamic_distributed" and "rounds" not in lp:
+        if not self.sparse and follower_law == "dynamic_distributed" and "rounds" not in lp:
             lp["rounds"] = _fewest_stable_rounds(om, fw.leaders, dyn, self.dt, lp)
         self.law_params = lp
-        self.law, step_map, rho = _law_and_map(om, fw.leaders, dyn, follower_law, self.dt, lp)
+        step_map: Any = None
+        if not self.sparse:
+            self.law, step_map, rho = _law_and_map(om, fw.leaders, dyn, follower_law, self.dt, lp)
         self.spectral_radius = rho
         if rho >= 1.0:
             warnings.warn(
@@ -410,11 +432,16 @@ class Engine:
         self._fused_success = type(self.scenario).is_success is Scenario.is_success
         self._step_map = step_map
         self._build_obs_layout()
-        self._build_static()
-        self._build_geometry_template()
+        if not self.sparse:
+            self._build_static()
+            self._build_geometry_template()
         self._build_bounds()
-        self._build_fast1()
-        self._build_kernel_batch()
+        if self.sparse:
+            self._swarm = swarm.SwarmStep(self)
+            self._fast1 = self._kbatch = False  # the compiled paths use the folded (dense) matrices
+        else:
+            self._build_fast1()
+            self._build_kernel_batch()
 
     # ------------------------------------------------------------------ construction
     @property
@@ -428,7 +455,8 @@ class Engine:
             raise FormationError(f"max_cycles must be a positive integer, got {value}")
         self._max_cycles = int(value)
         self._build_obs_layout()
-        self._build_static()
+        if not self.sparse:
+            self._build_static()
 
     def _build_obs_layout(self) -> None:
         """Observation blocks of one leader, and W mapping [pos, vel, ref] (B, 4 n d + 2) to its linear entries."""
@@ -453,6 +481,8 @@ class Engine:
             off += size
         self.obs_dim = off
         L1 = self.L1 = self.obs_blocks["time"].stop  # entries linear in [pos, vel, ref]
+        if self.sparse:  # the swarm path computes these entries directly
+            return
         pinv = self.affine._pinv  # (d + 1, n): rows of Theta^T, then b
         sl = self.obs_blocks
         w = np.zeros((4 * nd + 2, nl * L1))  # rows: pos, vel, goal, goal_vel, 1, k
@@ -687,6 +717,8 @@ class Engine:
         return self._reset_from({key: np.concatenate([dr[key] for dr in draws]) for key in draws[0]})
 
     def _reset_from(self, params: dict[str, Array]) -> EngineState:
+        if self._swarm is not None:
+            return self._swarm.reset_from(params)
         B = int(params["segments"].shape[0])
         start = np.array(params.pop("start"), dtype=np.float64)
         k = np.zeros(B, dtype=np.int64)
@@ -817,6 +849,8 @@ class Engine:
     # ------------------------------------------------------------------ observation
     def observe(self, state: EngineState) -> NDArray[np.float32]:
         """Observations of every leader, shape (B, n_l, obs_dim), float32 (layout: ``obs_blocks``)."""
+        if self._swarm is not None:
+            return self._swarm.observe(state)
         B = state.batch_size
         pos1, paug, laug = self._aug(state.pos)
         geo = self._features(pos1, paug, laug, state.params, state.ref)
@@ -871,6 +905,8 @@ class Engine:
             with info arrays: success, collision, out_of_bounds (B,) bool; formation_error, min_clearance,
             goal_distance, time (B,) in m and s; control_effort (B, n_l), |u_i|^2.
         """
+        if self._swarm is not None:
+            return self._swarm.step(state, actions)
         B = state.x.shape[0]
         if B == 1 and "_M1" in state.params:  # the single-env fast path, in arrays
             new, obs, rew, term, trunc, inf = self.step1(state, actions)

@@ -133,6 +133,10 @@ NAMED_FRAMEWORKS: dict[str, Callable[[], tuple[Framework, Array]]] = {
 }
 
 
+#: Up to this many agents ``Scenario.start_positions`` checks all pairs; above, a k-d tree.
+ALL_PAIRS_GAP_UP_TO = 512
+
+
 class Scenario:
     """Base class of the scenarios (see the module docstring for the hooks).
 
@@ -237,7 +241,7 @@ class Scenario:
         f = np.asarray(self.fw.followers)
         if follower_noise <= 0 or f.size == 0:
             return out
-        iu, ju = np.triu_indices(self.fw.n, 1)
+        iu, ju = np.triu_indices(self.fw.n, 1) if self.fw.n <= ALL_PAIRS_GAP_UP_TO else (None, None)
         todo = np.arange(B)
         for _ in range(tries):
             dirs = rng.normal(size=(todo.size, f.size, self.d))
@@ -245,8 +249,14 @@ class Scenario:
             rad = follower_noise * rng.uniform(size=(todo.size, f.size, 1)) ** (1.0 / self.d)
             trial = base[todo].copy()
             trial[:, f] += dirs * rad
-            gap = np.linalg.norm(trial[:, iu] - trial[:, ju], axis=-1).min(axis=1)
-            ok = gap >= 3.0 * self.agent_radius
+            if iu is not None:
+                gap = np.linalg.norm(trial[:, iu] - trial[:, ju], axis=-1).min(axis=1)
+                ok = gap >= 3.0 * self.agent_radius
+            else:  # large swarms: a k-d tree finds the close pairs in O(n log n), not n^2 / 2 pairs
+                from scipy.spatial import cKDTree
+
+                gap3 = 3.0 * self.agent_radius
+                ok = np.array([not cKDTree(t).query_pairs(gap3, eps=0.0, output_type="ndarray").size for t in trial])
             out[todo[ok]] = trial[ok]
             todo = todo[~ok]
             if todo.size == 0:

@@ -143,3 +143,25 @@ def test_compiled_batch_step_equals_the_numpy_step(scenario, dynamics, law):
             fast = ref = eng.reset(rng, 4)
     if scenario in ("narrow_passage", "obstacle_field"):
         assert guarded > 0  # contacts or the world box were exercised
+
+
+def test_compiled_steps_keep_one_signature_each():
+    """Every scenario, B = 1 and B = 4, with and without law memory, calls each kernel with the same argument
+    types and layouts: one compiled version each (a second would cost a compile of several seconds)."""
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    for scenario, dynamics, law in [
+        ("narrow_passage", "double_integrator", "dynamic_distributed"),
+        ("obstacle_field", "single_integrator", "stationary"),
+        ("maneuver_3d", "double_integrator", "linear"),
+        ("hold", "single_integrator", "dynamic"),
+    ]:
+        eng = Engine(scenario, dynamics, law)
+        for B in (1, 4):
+            s = eng.reset(np.random.default_rng(0), B)
+            for _ in range(3):
+                s = eng.step(s, np.full((B, eng.n_l, eng.p), 0.2))[0]
+            sub = eng.select(s, [0])  # a sub-batch of one, without the folded map
+            eng.step(sub, np.zeros((1, eng.n_l, eng.p)))
+    assert len(_kernel.step1.signatures) == 1
+    assert len(_kernel.batch.signatures) == 1

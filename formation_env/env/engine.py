@@ -1043,15 +1043,15 @@ class Engine:
         self._sense_cache: dict[int, Array] = {}
         self._ks = ks
         self._no_walls = np.zeros((1, d + 1, 0))
+        self._no_walls.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
 
     def _sense_fill(self, B: int) -> Array:
-        """A read-only (B, n_l, ks) array of the constant sensing (no obstacles), or a (1, n_l, ks) dummy."""
+        """A cached (B, n_l, ks) array of the constant sensing (no obstacles), or a (1, n_l, ks) dummy."""
         key = B if self._bmode == _kernel.SENSE_CONST else 0
         arr = self._sense_cache.get(key)
         if arr is None:
             shape = (max(key, 1), self.n_l, self._ks)
             arr = np.zeros(shape) if self._const_sense is None else np.broadcast_to(self._const_sense, shape).copy()
-            arr.setflags(write=False)
             self._sense_cache[key] = arr
         return arr
 
@@ -1199,6 +1199,7 @@ class Engine:
         self._rew_tail = np.ascontiguousarray(self._w_rew[3:])
         self._rew_head = [float(w) for w in self._w_rew[:3, 0]]  # success, collision, formation (all leaders)
         self._no_rays = np.zeros((d + 1, 0))
+        self._no_rays.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
         self._no_mem = np.zeros(0)
 
     def _fold_episode(self, params: dict[str, Array]) -> None:
@@ -1241,7 +1242,7 @@ class Engine:
         """
         params = state.params
         m1 = params.get("_M1")
-        a = np.asarray(actions, dtype=np.float64)
+        a = np.array(actions, dtype=np.float64)  # a writable copy: the kernel's argument types stay the same
         if m1 is None or state.x.shape[0] != 1:
             new, obs, rew, term, trunc, arrays = self.step(state, a.reshape(1, self.n_l, self.p))
             inf1: dict[str, Any] = {key: val[0].item() for key, val in arrays.items() if key != "control_effort"}
@@ -1372,6 +1373,9 @@ class Engine:
     def select(self, state: EngineState, index: ArrayLike) -> EngineState:
         """The sub-batch ``index`` of ``state`` (for tests and vectorised resets)."""
         idx = np.atleast_1d(np.asarray(index))
+        params = {kk: vv[idx] for kk, vv in state.params.items()}
+        for arr in params.values():
+            arr.setflags(write=False)
         return EngineState(
             state.x[idx],
             state.pos[idx],
@@ -1382,5 +1386,5 @@ class Engine:
             state.goal_dist[idx],
             state.err[idx],
             state.streak[idx],
-            {kk: vv[idx] for kk, vv in state.params.items()},
+            params,
         )

@@ -213,6 +213,21 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
                 labels[key] = f"VMAS {scen} CPU B={B} n=10, torch threads={threads}" + (
                     " (default)" if threads == default_threads else ""
                 )
+        # VMAS's own default size (simple_spread: n_agents=3), the cheapest VMAS case to compare with
+        env3 = vmas.make_env("simple_spread", num_envs=B, device="cpu", continuous_actions=True, seed=0)
+        env3.reset()
+        vacts3 = [[env3.get_random_action(a) for a in env3.agents] for _ in range(8)]
+
+        def vstep3(env: Any = env3, vacts: list[Any] = vacts3, c: list[int] = [0]) -> None:  # noqa: B006
+            torch.set_num_threads(default_threads)
+            with torch.no_grad():
+                env.step(vacts[c[0] & 7])
+            c[0] += 1
+
+        fns["vmas_simple_spread_n3"] = vstep3
+        labels["vmas_simple_spread_n3"] = (
+            f"VMAS simple_spread CPU B={B} n={len(env3.agents)} (its default), torch threads={default_threads}"
+        )
         torch.set_num_threads(default_threads)
     else:
         rows.append(

@@ -41,6 +41,7 @@ Example::
 from __future__ import annotations
 
 from collections.abc import Sequence
+from itertools import repeat, starmap
 from typing import Any
 
 import gymnasium
@@ -239,22 +240,24 @@ class FormationVecEnv(VecEnv):
             rews = (rew.sum(axis=1) * (1.0 / self.n_l)).astype(np.float32)
         done_env = term | trunc
         dones = np.repeat(done_env, k) if k > 1 else done_env.copy()
-        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
+        infos: list[dict[str, Any]] = list(starmap(dict, repeat((), self.num_envs)))  # fresh empty dicts, fast
         if done_env.any():
             envs = np.flatnonzero(done_env)
-            slots = (envs[:, None] * k + np.arange(k)).reshape(-1)
-            final = obs[slots].copy()
-            cut = np.repeat(trunc[envs] & ~term[envs], k)
-            for j, s in enumerate(slots):
-                b = s // k
-                inf = infos[s]
-                inf["terminal_observation"] = final[j]
-                inf["TimeLimit.truncated"] = bool(cut[j])
-                for key in _DONE_INFO:
-                    inf[key] = info[key][b].item()
+            final = obs[(envs[:, None] * k + np.arange(k)).reshape(-1)]  # a copy: obs is overwritten below
+            cut = (trunc[envs] & ~term[envs]).tolist()
+            cols = [info[key][envs].tolist() for key in _DONE_INFO]
+            j = 0
+            for e, b in enumerate(envs.tolist()):
+                done_info = dict(zip(_DONE_INFO, [c[e] for c in cols], strict=True))
+                done_info["TimeLimit.truncated"] = cut[e]
+                for s in range(b * k, b * k + k):
+                    inf = infos[s]
+                    inf["terminal_observation"] = final[j]
+                    inf.update(done_info)
+                    j += 1
             fresh = self._draw(envs)
             _scatter(state, envs, fresh)
-            obs[slots] = self._observe(fresh)
+            obs[(envs[:, None] * k + np.arange(k)).reshape(-1)] = self._observe(fresh)
         return obs, rews, dones, infos
 
     def close(self) -> None:

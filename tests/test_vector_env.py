@@ -195,7 +195,8 @@ RESET_CASES = [
     ("hold", {"framework": "bipyramid_3d"}),
     ("hold", {"start": "paper"}),
     ("hold", {"goal_shear": (0.0, 0.0), "follower_noise": 0.0}),
-    ("hold", {"framework": "many", "follower_noise": 0.5}),
+    ("hold", {"framework": "many", "follower_noise": 0.5}),  # ~9 in 10 draws redrawn
+    ("hold", {"framework": "many", "follower_noise": 0.5, "agent_radius": 0.15}),  # most use up all 20 draws
     ("narrow_passage", {"wall_x": (0.2, 0.2)}),
     ("maneuver", {}),
     ("maneuver_3d", {}),
@@ -224,6 +225,18 @@ def test_reset_each_consumes_each_stream_as_a_single_reset(scenario, kwargs):
         for key, arr in want.items():
             np.testing.assert_allclose(got[key][b], arr[0], rtol=0, atol=1e-12, err_msg=key)
         assert rngs[b].random() == g.random()  # the same numbers were consumed
+
+
+@pytest.mark.parametrize("ahead", [1, 3, 19, 50])
+def test_redraws_ahead_leave_the_streams_as_one_at_a_time(ahead):
+    eng = _engine("hold", {"framework": "many", "follower_noise": 0.5})
+    eng.scenario.redraw_ahead = ahead
+    rngs = [np.random.default_rng(s) for s in range(16)]
+    got = eng.scenario.reset_each(rngs)
+    for b in range(16):
+        g = np.random.default_rng(b)
+        np.testing.assert_allclose(got["start"][b], eng.scenario.reset(g, 1)["start"][0], rtol=0, atol=1e-12)
+        assert rngs[b].random() == g.random()
 
 
 def test_episodes_of_a_seed_are_pinned():

@@ -164,6 +164,7 @@ class Scenario:
     formation_tol_default: ClassVar[float] = 0.05
     hold_steps_default: ClassVar[int] = 1
     start_tries: ClassVar[int] = 20
+    redraw_ahead: ClassVar[int] = 4
     follower_noise: float = 0.0
 
     def __init__(self, fw: Framework, *, agent_radius: float, horizon: float, **kwargs: Any) -> None:
@@ -217,7 +218,7 @@ class Scenario:
         raw = self._plan.draw(rng, B)
         params, pose = self.build(raw)
         if pose is not None:
-            params["start"] = self._place_start(pose, raw, lambda todo: self._redraw(rng, todo.size))
+            params["start"] = self._place_start(pose, raw, lambda *a: self._retry(rng, *a))
         return params
 
     def reset_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
@@ -233,7 +234,7 @@ class Scenario:
         raw = self._plan.draw_each(rngs)
         params, pose = self.build(raw)
         if pose is not None:
-            params["start"] = self._place_start(pose, raw, lambda todo: self._redraw_each([rngs[b] for b in todo]))
+            params["start"] = self._place_start(pose, raw, lambda *a: self._retry_each(rngs, *a))
         return params
 
     def reference(self, params: dict[str, Array], t: Array) -> tuple[Array, Array]:
@@ -284,8 +285,12 @@ class Scenario:
         return iu, ju
 
     @functools.cached_property
-    def _followers(self) -> NDArray[np.intp]:
-        return np.asarray(self.fw.followers, dtype=np.intp)
+    def _followers(self) -> NDArray[np.intp] | slice:
+        """The followers' indices: a slice when they are consecutive (a view, cheaper than fancy indexing)."""
+        f = np.asarray(self.fw.followers, dtype=np.intp)
+        if f.size and np.array_equal(f, np.arange(f[0], f[0] + f.size)):
+            return slice(int(f[0]), int(f[0]) + f.size)
+        return f
 
     def _noisy(self, base: Array, noise: Array, follower_noise: float) -> tuple[Array, NDArray[np.bool_]]:
         """Followers moved by the raw noise (B, n_f d + n_f) = [directions, radius draws] within a ball of
@@ -309,21 +314,57 @@ class Scenario:
         u = rng.uniform(size=(m, nf, 1))
         return np.concatenate([dirs.reshape(m, -1), u.reshape(m, -1)], axis=1)
 
-    def _redraw_each(self, rngs: Sequence[np.random.Generator]) -> Array:
-        """The followers' noise of one episode per generator (as ``_redraw(rngs[b], 1)``), (m, n_f d + n_f)."""
-        nfd = len(self.fw.followers) * self.d
-        out = np.empty((len(rngs), nfd + len(self.fw.followers)))
-        for g, row in zip(rngs, out, strict=True):
-            g.standard_normal(out=row[:nfd])
-            g.random(out=row[nfd:])
-        return out
+    def _retry(self, rng: np.random.Generator, base: Array, out: Array, todo: NDArray[np.intp]) -> None:
+        """Redraw the followers' noise of episodes ``todo`` from one generator, all of them per round (as
+        :meth:`start_positions`), writing the first good draw of each into ``out``; ``start_tries`` in all."""
+        for _ in range(self.start_tries - 1):
+            if todo.size == 0:
+                break
+            trial, ok = self._noisy(base[todo], self._redraw(rng, todo.size), self.follower_noise)
+            out[todo[ok]] = trial[ok]
+            todo = todo[~ok]
+
+    def _retry_each(self, rngs: Sequence[np.random.Generator], base: Array, out: Array, todo: NDArray[np.intp]) -> None:
+        """As :meth:`_retry`, but episode b redraws from ``rngs[b]`` alone, one draw at a time as
+        ``reset(rngs[b], 1)`` does. Drawn ahead for speed: ``redraw_ahead`` draws per generator are judged
+        in one batch, then the generator is put back to its state just after its first good draw (its state
+        is saved after each draw), so it ends where drawing one at a time would leave it."""
+        nf, d = len(self.fw.followers), self.d
+        nfd, w = nf * d, nf * d + nf
+        left = self.start_tries - 1
+        while todo.size and left > 0:
+            r = min(self.redraw_ahead, left)
+            m = todo.size
+            cand = np.empty((m, r, w))
+            saved: list[list[dict[str, Any]]] = []
+            for g, rows in zip([rngs[b] for b in todo.tolist()], cand, strict=True):
+                bg, after = g.bit_generator, []
+                for j, row in enumerate(rows):
+                    g.standard_normal(out=row[:nfd])
+                    g.random(out=row[nfd:])
+                    if j < r - 1:
+                        after.append(bg.state)
+                saved.append(after)
+            trial, ok = self._noisy(np.repeat(base[todo], r, axis=0), cand.reshape(m * r, w), self.follower_noise)
+            ok = ok.reshape(m, r)
+            hit = ok.any(axis=1)
+            first = ok.argmax(axis=1)
+            for i in np.flatnonzero(hit & (first < r - 1)).tolist():
+                rngs[todo[i]].bit_generator.state = saved[i][first[i]]
+            good = np.flatnonzero(hit)
+            out[todo[good]] = trial.reshape(m, r, *base.shape[1:])[good, first[good]]
+            todo = todo[~hit]
+            left -= r
 
     def _place_start(
-        self, pose: tuple[Array, Array], raw: dict[str, Array], redraw: Callable[[NDArray[np.intp]], Array]
+        self,
+        pose: tuple[Array, Array],
+        raw: dict[str, Array],
+        retry: Callable[[Array, Array, NDArray[np.intp]], None],
     ) -> Array:
         """Start positions (B, n, d) on ``pose`` = (Theta0, b0), followers moved by the noise of the draws
         ``_dirs``, ``_u`` (:meth:`follower_draws`; none: no noise). Episodes whose agents start closer than
-        3 radii get ``redraw(episodes)`` (m, n_f d + n_f), up to 20 draws in all, then zero noise."""
+        3 radii get ``retry(base, out, episodes)`` (more draws, ``start_tries`` in all, then zero noise)."""
         base = affine_batch(self.r, *pose)
         if "_u" not in raw:
             return base
@@ -332,13 +373,8 @@ class Scenario:
         noise = np.concatenate([raw["_dirs"].reshape(B, -1), raw["_u"].reshape(B, -1)], axis=1)
         trial, ok = self._noisy(base, noise, self.follower_noise)
         out[ok] = trial[ok]
-        todo = np.flatnonzero(~ok)
-        for _ in range(self.start_tries - 1):
-            if todo.size == 0:
-                break
-            trial, ok = self._noisy(base[todo], redraw(todo), self.follower_noise)
-            out[todo[ok]] = trial[ok]
-            todo = todo[~ok]
+        if not ok.all():
+            retry(base, out, np.flatnonzero(~ok))
         return out
 
     def start_positions(

@@ -6,8 +6,13 @@ observation and the reward formula; a scenario supplies the task:
 
 * ``__init__(fw, *, agent_radius, horizon, **kwargs)`` ("make"): reads its own
   keyword arguments and refuses unknown ones.
-* ``reset(rng, B)``: per-episode arrays with a leading batch dim B: start
-  positions, goal pose, obstacles, and any parameters of its own.
+* ``draws()`` and ``build(raw)``: the episode's random draws in stream order
+  (:class:`Draw`: uniform in a range, standard normal, or a sign), and the
+  draw-free, batched map from them to the per-episode arrays. From these the base
+  class makes ``reset(rng, B)`` (B episodes from one generator: start positions,
+  goal pose, obstacles, and any parameters of its own) and ``reset_each(rngs)``
+  (one episode per generator, equal to ``reset(rngs[b], 1)``, with only the draws
+  run per generator: the vectorised env's auto-reset).
 * ``reference(params, t)``: the goal pose (Theta(t), b(t)) at time t for
   scenarios whose goal moves (``moving_goal``); static goals are ``goal_theta``
   and ``goal_b`` from ``reset``.

@@ -178,3 +178,157 @@ def test_sb3_ppo_runs(mode):
     model.learn(total_timesteps=2 * 16 * venv.num_envs)
     act, _ = model.predict(venv.reset(), deterministic=True)
     assert act.shape == (venv.num_envs, venv.action_space.shape[0])
+
+
+# ---------------------------------------------------------------------------- fast auto-reset path
+def _many_followers():
+    """10 agents (3 leaders, 7 followers close together): most follower-noise draws are redrawn."""
+    from formation_env.core.framework import Framework
+
+    ang = np.linspace(0, 2 * np.pi, 8)[:-1] + 0.3
+    r = np.concatenate([[[1.0, 0.0], [-0.5, 0.9], [-0.5, -0.9]], 0.6 * np.stack([np.cos(ang), np.sin(ang)], 1)])
+    return Framework(r, [(i, j) for i in range(10) for j in range(i + 1, 10)], leaders=[0, 1, 2], name="ten")
+
+
+RESET_CASES = [
+    ("hold", {}),
+    ("hold", {"framework": "bipyramid_3d"}),
+    ("hold", {"start": "paper"}),
+    ("hold", {"goal_shear": (0.0, 0.0), "follower_noise": 0.0}),
+    ("hold", {"framework": "many", "follower_noise": 0.5}),  # ~9 in 10 draws redrawn
+    ("hold", {"framework": "many", "follower_noise": 0.5, "agent_radius": 0.15}),  # most use up all 20 draws
+    ("narrow_passage", {"wall_x": (0.2, 0.2)}),
+    ("maneuver", {}),
+    ("maneuver_3d", {}),
+    ("obstacle_field", {"framework": "bipyramid_3d"}),
+]
+
+
+def _engine(scenario: str, kwargs: dict) -> Engine:
+    kw = dict(kwargs)
+    if kw.get("framework") == "many":
+        kw["framework"] = _many_followers()
+    return Engine(scenario, **kw)
+
+
+@pytest.mark.parametrize(("scenario", "kwargs"), RESET_CASES)
+def test_reset_each_consumes_each_stream_as_a_single_reset(scenario, kwargs):
+    """Entry b of reset_each equals reset(rng_b, 1), and every generator is left where that reset leaves it."""
+    eng = _engine(scenario, kwargs)
+    seeds = range(12)
+    rngs = [np.random.default_rng(s) for s in seeds]
+    got = eng.scenario.reset_each(rngs)
+    for b, s in enumerate(seeds):
+        g = np.random.default_rng(s)
+        want = eng.scenario.reset(g, 1)
+        assert set(got) == set(want)
+        for key, arr in want.items():
+            np.testing.assert_allclose(got[key][b], arr[0], rtol=0, atol=1e-12, err_msg=key)
+        assert rngs[b].random() == g.random()  # the same numbers were consumed
+
+
+@pytest.mark.parametrize("ahead", [1, 3, 19, 50])
+def test_redraws_ahead_leave_the_streams_as_one_at_a_time(ahead):
+    eng = _engine("hold", {"framework": "many", "follower_noise": 0.5})
+    eng.scenario.redraw_ahead = ahead
+    rngs = [np.random.default_rng(s) for s in range(16)]
+    got = eng.scenario.reset_each(rngs)
+    for b in range(16):
+        g = np.random.default_rng(b)
+        np.testing.assert_allclose(got["start"][b], eng.scenario.reset(g, 1)["start"][0], rtol=0, atol=1e-12)
+        assert rngs[b].random() == g.random()
+
+
+def test_episodes_of_a_seed_are_pinned():
+    """The draws of a seed are those of formation_env 0.x (changing them changes every published episode)."""
+    p = Engine("narrow_passage").scenario.reset(np.random.default_rng(0), 1)
+    np.testing.assert_allclose(p["gap_width"], [1.024584114361717], rtol=1e-12)
+    np.testing.assert_allclose(p["start"][0, 3], [-5.476649904768345, 0.7172732784031389], rtol=1e-12)
+    p = Engine("hold").scenario.reset(np.random.default_rng(0), 1)
+    np.testing.assert_allclose(p["goal_b"][0], [0.9179862439359936, 0.17449996586169148], rtol=1e-12)
+    np.testing.assert_allclose(p["start"][0, 4], [-1.759904963329976, -2.6906820570808994], rtol=1e-12)
+    p = Engine("maneuver").scenario.reset(np.random.default_rng(0), 1)
+    np.testing.assert_allclose(p["angle"], [1.2618487875361777], rtol=1e-12)
+    np.testing.assert_allclose(p["start"][0, 4], [0.9591082971919788, 1.090006602307127], rtol=1e-12)
+    p = Engine("obstacle_field").scenario.reset(np.random.default_rng(0), 1)
+    np.testing.assert_allclose(p["circles"][0, 0], [0.09240421830363577, 0.8530862061374389, 0.5572212829762708])
+    np.testing.assert_allclose(p["start"][0, 4], [-6.3283046295798435, -1.2684581053957646], rtol=1e-12)
+
+
+def test_draw_plan_each_equals_batched_draw_of_one():
+    from formation_env.env.scenarios._base import Draw, DrawPlan
+
+    plan = DrawPlan(
+        [
+            Draw("a", (2,), bounds=(-1.0, 3.0)),
+            Draw("const", (3,), bounds=(0.5, 0.5)),
+            Draw("b", bounds=(0.0, 2.0)),
+            Draw("n", (2, 2), "normal"),
+            Draw("m", (3,), "normal"),
+            Draw("s", (4,), "sign"),
+            Draw("t", (1,), "sign"),
+            Draw("empty", (0, 2)),
+            Draw("c", bounds=(2.0, 5.0)),
+        ]
+    )
+    assert [c[0] for c in plan.calls] == ["uniform", "uniform", "normal", "sign", "sign", "uniform"]
+    rngs = [np.random.default_rng(s) for s in range(6)]
+    got = plan.draw_each(rngs)
+    for b in range(6):
+        g = np.random.default_rng(b)
+        want = plan.draw(g, 1)
+        for key, arr in want.items():
+            np.testing.assert_array_equal(got[key][b], arr[0], err_msg=key)
+        assert rngs[b].random() == g.random()
+    assert set(np.unique(got["s"])) <= {-1.0, 1.0} and np.all(got["const"] == 0.5)
+
+
+def test_draw_plan_errors():
+    from formation_env.env.scenarios._base import Draw, DrawPlan
+
+    with pytest.raises(FormationError, match="draw names must be unique"):
+        DrawPlan([Draw("a"), Draw("a")])
+    with pytest.raises(FormationError, match="kind must be uniform, normal or sign"):
+        DrawPlan([Draw("a", kind="gamma")])
+
+
+def test_vec_env_replays_engine_resets_with_many_redraws():
+    """Hold with 7 crowded followers (most start draws are redrawn) and short episodes: env b equals an
+    engine stepped alone and reset from the generator of seed + b, episode after episode."""
+    B, seed = 5, 3
+    eng = _engine("hold", {"framework": "many", "follower_noise": 0.5, "max_cycles": 4})
+    venv = FormationVecEnv(num_envs=B, engine=eng, seed=seed)
+    obs = venv.reset()
+    rngs = [np.random.default_rng(seed + b) for b in range(B)]
+    singles = [eng.reset(g, 1) for g in rngs]
+    nl = venv.n_l
+    rng = np.random.default_rng(0)
+    n_done = 0
+    for _ in range(13):
+        for b in range(B):
+            np.testing.assert_allclose(obs[b * nl : (b + 1) * nl], eng.observe(singles[b])[0], **TOL)
+            np.testing.assert_allclose(venv.state.pos[b], singles[b].pos[0], rtol=0, atol=1e-12)
+        act = _actions(rng, (B * nl, venv.p), 0.3)
+        obs, _, done, infos = venv.step(act)
+        for b in range(B):
+            singles[b], o, _, te, tr, _ = eng.step(singles[b], act[b * nl : (b + 1) * nl][None])
+            assert done[b * nl] == bool(te[0] or tr[0])
+            if te[0] or tr[0]:
+                n_done += 1
+                np.testing.assert_allclose(infos[b * nl]["terminal_observation"], o[0, 0], **TOL)
+                singles[b] = eng.reset(rngs[b], 1)
+    assert n_done >= 3 * B
+
+
+def test_infos_are_fresh_dicts_with_keys_only_where_done():
+    venv = FormationVecEnv("hold", num_envs=3, mode="shared", seed=0, max_cycles=2)
+    venv.reset()
+    _, _, done, infos = venv.step(np.zeros((venv.num_envs, venv.p)))
+    assert not done.any() and infos == [{}] * venv.num_envs
+    assert len({id(i) for i in infos}) == venv.num_envs  # no shared dict
+    _, _, done, infos = venv.step(np.zeros((venv.num_envs, venv.p)))
+    assert done.all()
+    keys = {"terminal_observation", "TimeLimit.truncated", "success", "collision", "out_of_bounds"}
+    assert all(keys <= set(i) for i in infos)
+    assert all(i["TimeLimit.truncated"] is True and type(i["success"]) is bool for i in infos)
+    assert len({id(i["terminal_observation"]) for i in infos}) == venv.num_envs

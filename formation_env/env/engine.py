@@ -709,12 +709,11 @@ class Engine:
 
     def reset_each(self, rngs: list[np.random.Generator]) -> EngineState:
         """One new episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` up to rounding (for
-        vectorised envs whose copies are seeded one by one). The scenario draws run per generator, the rest
-        batched."""
+        vectorised envs whose copies are seeded one by one). Only the scenario's draws run per generator
+        (``Scenario.reset_each``), the rest batched."""
         if not rngs:
             raise FormationError("reset_each needs at least one generator")
-        draws = [self.scenario.reset(g, 1) for g in rngs]
-        return self._reset_from({key: np.concatenate([dr[key] for dr in draws]) for key in draws[0]})
+        return self._reset_from(dict(self.scenario.reset_each(rngs)))
 
     def _reset_from(self, params: dict[str, Array]) -> EngineState:
         if self._swarm is not None:
@@ -731,8 +730,11 @@ class Engine:
             arr.setflags(write=False)
         geo = self._features(*self._aug(start), params, ref)
         nv = self._norms(geo)
+        at_rest = self.__dict__.get("_at_rest")  # x at rest from positions: dynamics.state_from_position, cached
+        if at_rest is None:
+            at_rest = self.__dict__["_at_rest"] = np.linalg.pinv(self.dynamics.C).T
         return EngineState(
-            x=self.dynamics.state_from_position(start),
+            x=start @ at_rest,
             pos=start,
             vel=np.zeros_like(start),
             memory=self.law.initial_memory((B,)),

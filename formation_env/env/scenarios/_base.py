@@ -6,8 +6,13 @@ observation and the reward formula; a scenario supplies the task:
 
 * ``__init__(fw, *, agent_radius, horizon, **kwargs)`` ("make"): reads its own
   keyword arguments and refuses unknown ones.
-* ``reset(rng, B)``: per-episode arrays with a leading batch dim B: start
-  positions, goal pose, obstacles, and any parameters of its own.
+* ``draws()`` and ``build(raw)``: the episode's random draws in stream order
+  (:class:`Draw`: uniform in a range, standard normal, or a sign), and the
+  draw-free, batched map from them to the per-episode arrays. From these the base
+  class makes ``reset(rng, B)`` (B episodes from one generator: start positions,
+  goal pose, obstacles, and any parameters of its own) and ``reset_each(rngs)``
+  (one episode per generator, equal to ``reset(rngs[b], 1)``, with only the draws
+  run per generator: the vectorised env's auto-reset).
 * ``reference(params, t)``: the goal pose (Theta(t), b(t)) at time t for
   scenarios whose goal moves (``moving_goal``); static goals are ``goal_theta``
   and ``goal_b`` from ``reset``.
@@ -22,8 +27,9 @@ configuration r; every pose array is batched: Theta (B, d, d), b (B, d).
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any, ClassVar
+import functools
+from collections.abc import Callable, Sequence
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,6 +40,8 @@ from formation_env.core.validation import check_kwargs_consumed
 
 __all__ = [
     "NAMED_FRAMEWORKS",
+    "Draw",
+    "DrawPlan",
     "Scenario",
     "affine_batch",
     "bipyramid_3d",
@@ -164,6 +172,9 @@ class Scenario:
     goal_tol_default: ClassVar[float] = 0.2
     formation_tol_default: ClassVar[float] = 0.05
     hold_steps_default: ClassVar[int] = 1
+    start_tries: ClassVar[int] = 20
+    redraw_ahead: ClassVar[int] = 4
+    follower_noise: float = 0.0
 
     def __init__(self, fw: Framework, *, agent_radius: float, horizon: float, **kwargs: Any) -> None:
         if fw.d not in self.dims:
@@ -193,10 +204,47 @@ class Scenario:
         """Read scenario-specific keyword arguments (pop them from ``kwargs``)."""
 
     # ---------------------------------------------------------------- hooks
+    def draws(self) -> list[Draw]:
+        """The random draws of one episode, in stream order (the last two are :meth:`follower_draws` where
+        the start positions are noisy). :meth:`reset` and :meth:`reset_each` take them from here."""
+        raise NotImplementedError
+
+    def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
+        """Per-episode arrays from the draws (``raw[name]`` of shape (B, *shape)), batched and draw-free.
+
+        Returns (params, pose): params as :meth:`reset` (without ``start`` when pose is given), and the
+        start pose (Theta0 (B, d, d), b0 (B, d)) on which :meth:`reset` places the agents, or None when
+        params hold ``start``.
+        """
+        raise NotImplementedError
+
     def reset(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
         """Per-episode arrays: ``start`` (B, n, d), ``goal_theta`` (B, d, d), ``goal_b`` (B, d),
-        ``segments`` (B, S, 2, d), ``circles`` (B, C, d + 1), plus the scenario's own."""
-        raise NotImplementedError
+        ``segments`` (B, S, 2, d), ``circles`` (B, C, d + 1), plus the scenario's own.
+
+        Each draw of :meth:`draws` is one generator call for all B episodes, in order; then the
+        followers' noise is redrawn (for the offending episodes) as in :meth:`start_positions`."""
+        raw = self._plan.draw(rng, B)
+        params, pose = self.build(raw)
+        if pose is not None:
+            params["start"] = self._place_start(pose, raw, lambda *a: self._retry(rng, *a))
+        return params
+
+    def reset_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
+        """One episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` (the same draws; the
+        geometry runs once for all episodes, so values agree to rounding).
+
+        Per generator only the draws run, one call per run of same-kind draws (:class:`DrawPlan`).
+        A scenario without :meth:`draws` (one that overrides :meth:`reset` only) resets per generator.
+        """
+        if type(self).draws is Scenario.draws:
+            eps = [self.reset(g, 1) for g in rngs]
+            return {key: np.concatenate([ep[key] for ep in eps]) for key in eps[0]}
+        raw = self._plan.draw_each(rngs)
+        params, pose = self.build(raw)
+        if pose is not None:
+            params["start"] = self._place_start(pose, raw, lambda *a: self._retry_each(rngs, *a))
+        return params
 
     def reference(self, params: dict[str, Array], t: Array) -> tuple[Array, Array]:
         """Goal pose at times t (B,) s: Theta (B, d, d), b (B, d). Static goals return the reset pose."""
@@ -226,6 +274,123 @@ class Scenario:
         """Zero-size obstacle arrays of the right shapes."""
         return {"segments": np.zeros((B, 0, 2, self.d)), "circles": np.zeros((B, 0, self.d + 1))}
 
+    def follower_draws(self) -> list[Draw]:
+        """The followers' start noise, the last draws of an episode: directions ``_dirs`` (n_f, d)
+        standard normal, radii ``_u`` (n_f,) uniform in [0, 1]; none without followers or noise."""
+        nf = len(self.fw.followers)
+        if self.follower_noise <= 0 or nf == 0:
+            return []
+        return [Draw("_dirs", (nf, self.d), "normal"), Draw("_u", (nf,))]
+
+    @functools.cached_property
+    def _plan(self) -> DrawPlan:
+        """The layout of :meth:`draws` (built once)."""
+        return DrawPlan(self.draws())
+
+    @functools.cached_property
+    def _pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """All agent pairs (i < j) as index arrays."""
+        iu, ju = np.triu_indices(self.fw.n, 1)
+        return iu, ju
+
+    @functools.cached_property
+    def _followers(self) -> NDArray[np.intp] | slice:
+        """The followers' indices: a slice when they are consecutive (a view, cheaper than fancy indexing)."""
+        f = np.asarray(self.fw.followers, dtype=np.intp)
+        if f.size and np.array_equal(f, np.arange(f[0], f[0] + f.size)):
+            return slice(int(f[0]), int(f[0]) + f.size)
+        return f
+
+    def _noisy(self, base: Array, noise: Array, follower_noise: float) -> tuple[Array, NDArray[np.bool_]]:
+        """Followers moved by the raw noise (B, n_f d + n_f) = [directions, radius draws] within a ball of
+        ``follower_noise`` m; returns (positions (B, n, d), no two agents closer than 3 radii (B,))."""
+        B, nf, d = base.shape[0], len(self.fw.followers), self.d
+        dirs = noise[:, : nf * d].reshape(B, nf, d)  # norms as np.linalg.norm computes them, without its overhead
+        dirs = dirs / np.sqrt(np.add.reduce(dirs * dirs, axis=-1, keepdims=True))
+        rad = follower_noise * noise[:, nf * d :].reshape(B, nf, 1) ** (1.0 / d)
+        trial = base.copy()
+        trial[:, self._followers] += dirs * rad
+        gap3 = 3.0 * self.agent_radius
+        if self.fw.n > ALL_PAIRS_GAP_UP_TO:  # large swarms: a k-d tree finds the close pairs in O(n log n)
+            from scipy.spatial import cKDTree
+
+            return trial, np.array([not cKDTree(t).query_pairs(gap3, output_type="ndarray").size for t in trial])
+        iu, ju = self._pairs
+        diff = trial[:, iu] - trial[:, ju]
+        gap = np.sqrt(np.add.reduce(diff * diff, axis=-1).min(axis=1))
+        return trial, gap >= gap3
+
+    def _redraw(self, rng: np.random.Generator, m: int) -> Array:
+        """The followers' noise of m episodes from one generator (normal (m, n_f, d), then uniform (m, n_f, 1)),
+        as (m, n_f d + n_f)."""
+        nf, d = len(self.fw.followers), self.d
+        dirs = rng.normal(size=(m, nf, d))
+        u = rng.uniform(size=(m, nf, 1))
+        return np.concatenate([dirs.reshape(m, -1), u.reshape(m, -1)], axis=1)
+
+    def _retry(self, rng: np.random.Generator, base: Array, out: Array, todo: NDArray[np.intp]) -> None:
+        """Redraw the followers' noise of episodes ``todo`` from one generator, all of them per round (as
+        :meth:`start_positions`), writing the first good draw of each into ``out``; ``start_tries`` in all."""
+        for _ in range(self.start_tries - 1):
+            if todo.size == 0:
+                break
+            trial, ok = self._noisy(base[todo], self._redraw(rng, todo.size), self.follower_noise)
+            out[todo[ok]] = trial[ok]
+            todo = todo[~ok]
+
+    def _retry_each(self, rngs: Sequence[np.random.Generator], base: Array, out: Array, todo: NDArray[np.intp]) -> None:
+        """As :meth:`_retry`, but episode b redraws from ``rngs[b]`` alone, one draw at a time as
+        ``reset(rngs[b], 1)`` does. Drawn ahead for speed: ``redraw_ahead`` draws per generator are judged
+        in one batch, then the generator is put back to its state just after its first good draw (its state
+        is saved after each draw), so it ends where drawing one at a time would leave it."""
+        nf, d = len(self.fw.followers), self.d
+        nfd, w = nf * d, nf * d + nf
+        left = self.start_tries - 1
+        while todo.size and left > 0:
+            r = min(self.redraw_ahead, left)
+            m = todo.size
+            cand = np.empty((m, r, w))
+            saved: list[list[dict[str, Any]]] = []
+            for g, rows in zip([rngs[b] for b in todo.tolist()], cand, strict=True):
+                bg, after = g.bit_generator, []
+                for j, row in enumerate(rows):
+                    g.standard_normal(out=row[:nfd])
+                    g.random(out=row[nfd:])
+                    if j < r - 1:
+                        after.append(bg.state)
+                saved.append(after)
+            trial, ok = self._noisy(np.repeat(base[todo], r, axis=0), cand.reshape(m * r, w), self.follower_noise)
+            ok = ok.reshape(m, r)
+            hit = ok.any(axis=1)
+            first = ok.argmax(axis=1)
+            for i in np.flatnonzero(hit & (first < r - 1)).tolist():
+                rngs[todo[i]].bit_generator.state = saved[i][first[i]]
+            good = np.flatnonzero(hit)
+            out[todo[good]] = trial.reshape(m, r, *base.shape[1:])[good, first[good]]
+            todo = todo[~hit]
+            left -= r
+
+    def _place_start(
+        self,
+        pose: tuple[Array, Array],
+        raw: dict[str, Array],
+        retry: Callable[[Array, Array, NDArray[np.intp]], None],
+    ) -> Array:
+        """Start positions (B, n, d) on ``pose`` = (Theta0, b0), followers moved by the noise of the draws
+        ``_dirs``, ``_u`` (:meth:`follower_draws`; none: no noise). Episodes whose agents start closer than
+        3 radii get ``retry(base, out, episodes)`` (more draws, ``start_tries`` in all, then zero noise)."""
+        base = affine_batch(self.r, *pose)
+        if "_u" not in raw:
+            return base
+        B = base.shape[0]
+        out = base.copy()
+        noise = np.concatenate([raw["_dirs"].reshape(B, -1), raw["_u"].reshape(B, -1)], axis=1)
+        trial, ok = self._noisy(base, noise, self.follower_noise)
+        out[ok] = trial[ok]
+        if not ok.all():
+            retry(base, out, np.flatnonzero(~ok))
+        return out
+
     def start_positions(
         self, rng: np.random.Generator, theta: Array, b: Array, follower_noise: float, tries: int = 20
     ) -> Array:
@@ -236,29 +401,110 @@ class Scenario:
         Returns shape (B, n, d).
         """
         base = affine_batch(self.r, theta, b)
-        B = base.shape[0]
         out = base.copy()
-        f = np.asarray(self.fw.followers)
-        if follower_noise <= 0 or f.size == 0:
+        if follower_noise <= 0 or len(self.fw.followers) == 0:
             return out
-        iu, ju = np.triu_indices(self.fw.n, 1) if self.fw.n <= ALL_PAIRS_GAP_UP_TO else (None, None)
-        todo = np.arange(B)
+        todo = np.arange(base.shape[0])
         for _ in range(tries):
-            dirs = rng.normal(size=(todo.size, f.size, self.d))
-            dirs /= np.linalg.norm(dirs, axis=-1, keepdims=True)
-            rad = follower_noise * rng.uniform(size=(todo.size, f.size, 1)) ** (1.0 / self.d)
-            trial = base[todo].copy()
-            trial[:, f] += dirs * rad
-            if iu is not None:
-                gap = np.linalg.norm(trial[:, iu] - trial[:, ju], axis=-1).min(axis=1)
-                ok = gap >= 3.0 * self.agent_radius
-            else:  # large swarms: a k-d tree finds the close pairs in O(n log n), not n^2 / 2 pairs
-                from scipy.spatial import cKDTree
-
-                gap3 = 3.0 * self.agent_radius
-                ok = np.array([not cKDTree(t).query_pairs(gap3, eps=0.0, output_type="ndarray").size for t in trial])
+            trial, ok = self._noisy(base[todo], self._redraw(rng, todo.size), follower_noise)
             out[todo[ok]] = trial[ok]
             todo = todo[~ok]
             if todo.size == 0:
                 break
         return out
+
+
+class Draw(NamedTuple):
+    """One random draw of an episode: ``shape`` numbers of ``kind`` "uniform" (in ``bounds``, as
+    :func:`uniform`: a degenerate range draws nothing), "normal" (standard) or "sign" (-1 or +1,
+    as ``rng.choice([-1.0, 1.0])``)."""
+
+    name: str
+    shape: tuple[int, ...] = ()
+    kind: str = "uniform"
+    bounds: tuple[float, float] = (0.0, 1.0)
+
+
+class DrawPlan:
+    """The draws of one episode laid out as columns of a (B, K) array, and the generator calls that fill it.
+
+    ``draw(rng, B)`` makes one call per draw for B episodes (the scenarios' batched stream);
+    ``draw_each(rngs)`` makes, per generator, one call per run of same-kind draws (``rng.random`` for
+    consecutive uniform draws, ``rng.standard_normal`` for normal ones), which consumes the stream
+    exactly as ``draw(rng, 1)`` does: uniform(lo, hi) is lo + (hi - lo) u, as numpy computes it.
+    """
+
+    def __init__(self, draws: Sequence[Draw]) -> None:
+        names = [dr.name for dr in draws]
+        if len(set(names)) != len(names):
+            raise FormationError(f"draw names must be unique, got {names}")
+        for dr in draws:
+            if dr.kind not in ("uniform", "normal", "sign"):
+                raise FormationError(f"draw {dr.name!r}: kind must be uniform, normal or sign, got {dr.kind!r}")
+        self.draws = list(draws)
+        self.cols: dict[str, slice] = {}
+        lo: list[float] = []
+        span: list[float] = []
+        calls: list[list[Any]] = []  # [kind, start, stop] runs of the per-generator path
+        k = 0
+        for dr in self.draws:
+            size = int(np.prod(dr.shape, dtype=np.int64))
+            self.cols[dr.name] = slice(k, k + size)
+            a, b = (float(dr.bounds[0]), float(dr.bounds[1])) if dr.kind == "uniform" else (0.0, 1.0)
+            drawn = size > 0 and (dr.kind != "uniform" or b > a)
+            lo += [a] * size
+            span += [b - a if b > a else 0.0] * size
+            if drawn:
+                merge = calls and calls[-1][0] == dr.kind != "sign" and calls[-1][2] == k
+                if merge:
+                    calls[-1][2] = k + size
+                else:
+                    calls.append([dr.kind, k, k + size])
+            k += size
+        self.K = k
+        self.calls = [(str(c[0]), int(c[1]), int(c[2])) for c in calls]
+        self._lo = np.array(lo)
+        self._span = np.array(span)
+        kinds = np.array(
+            [dr.kind for dr in self.draws for _ in range(self.cols[dr.name].start, self.cols[dr.name].stop)]
+        )
+        self._unif = np.flatnonzero(kinds == "uniform")
+        self._sign = np.flatnonzero(kinds == "sign")
+
+    def draw(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
+        """One generator call per draw, each for all B episodes (the scenarios' ``reset(rng, B)`` stream)."""
+        out: dict[str, Array] = {}
+        for dr in self.draws:
+            size = (B, *dr.shape)
+            if dr.kind == "uniform":
+                out[dr.name] = uniform(rng, dr.bounds, size)
+            elif dr.kind == "normal":
+                out[dr.name] = rng.normal(size=size)
+            else:
+                out[dr.name] = rng.choice([-1.0, 1.0], size=size)
+        return out
+
+    def draw_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
+        """One episode per generator: entry b equals ``draw(rngs[b], 1)``; the Python work per generator
+        is one call per run of same-kind draws."""
+        B = len(rngs)
+        raw = np.zeros((B, self.K))
+        calls = self.calls
+        if len(calls) == 1 and calls[0][0] == "uniform":  # the common case: a single call per generator
+            _, a, b = calls[0]
+            for g, row in zip(rngs, raw[:, a:b], strict=True):
+                g.random(out=row)
+        else:
+            for g, row in zip(rngs, raw, strict=True):
+                for kind, a, b in calls:
+                    if kind == "uniform":
+                        g.random(out=row[a:b])
+                    elif kind == "normal":
+                        g.standard_normal(out=row[a:b])
+                    else:
+                        row[a:b] = g.integers(0, 2, size=b - a)
+        if self._sign.size:
+            raw[:, self._sign] = 2.0 * raw[:, self._sign] - 1.0  # choice([-1, 1]) picks index integers(0, 2)
+        u = self._unif
+        raw[:, u] = self._lo[u] + self._span[u] * raw[:, u]
+        return {dr.name: raw[:, self.cols[dr.name]].reshape(B, *dr.shape) for dr in self.draws}

@@ -23,7 +23,7 @@ import numpy as np
 
 from formation_env.core.errors import FormationError
 
-from ._base import Array, Scenario, rotation_2d, rotation_3d, uniform
+from ._base import Array, Draw, Scenario, rotation_2d, rotation_3d
 
 __all__ = ["Hold", "make"]
 
@@ -53,29 +53,38 @@ class Hold(Scenario):
         self.goal_shear = tuple(kw.pop("goal_shear", (-0.3, 0.3)))
         self.follower_noise = float(kw.pop("follower_noise", 0.3))
 
-    def _rotation(self, rng: np.random.Generator, angle: tuple[float, float], B: int) -> Array:
-        a = uniform(rng, angle, B)
-        if self.d == 2:
-            return rotation_2d(a)
-        return rotation_3d(rng.normal(size=(B, 3)), a)
+    def draws(self) -> list[Draw]:
+        d, pi = self.d, np.pi
+        axis = self.d == 3
+        out = [Draw("angle0", bounds=(-pi, pi))]
+        out += [Draw("axis0", (3,), "normal")] if axis else []
+        out += [
+            Draw("b0", (d,), bounds=self.start_b),
+            Draw("scale", (d,), bounds=self.goal_scale),
+            Draw("shear", bounds=self.goal_shear),
+            Draw("angle_g", bounds=self.goal_angle),
+        ]
+        out += [Draw("axis_g", (3,), "normal")] if axis else []
+        out += [Draw("b_g", (d,), bounds=self.goal_b)]
+        return out + (self.follower_draws() if self.start == "random" else [])
 
-    def reset(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
+    def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
         d = self.d
-        th0 = self._rotation(rng, (-np.pi, np.pi), B)
-        b0 = uniform(rng, self.start_b, (B, d))
-        sc = uniform(rng, self.goal_scale, (B, d))
+        B = raw["b0"].shape[0]
+        if d == 2:
+            th0, rot_g = rotation_2d(raw["angle0"]), rotation_2d(raw["angle_g"])
+        else:
+            th0, rot_g = rotation_3d(raw["axis0"], raw["angle0"]), rotation_3d(raw["axis_g"], raw["angle_g"])
         sh = np.broadcast_to(np.eye(d), (B, d, d)).copy()
-        sh[:, 0, 1] = uniform(rng, self.goal_shear, B)
-        thg = self._rotation(rng, self.goal_angle, B) @ sh @ (sc[:, :, None] * np.eye(d))
-        bg = uniform(rng, self.goal_b, (B, d))
+        sh[:, 0, 1] = raw["shear"]
+        thg = rot_g @ sh @ (raw["scale"][:, :, None] * np.eye(d))
+        params = {"goal_theta": thg, "goal_b": raw["b_g"], **self.empty_obstacles(B)}
         if self.start == "paper":
             start = np.broadcast_to(self.r, (B, 5, 2)).copy()
             start[:, 3:] = PAPER_FOLLOWER_START
-            thg = np.broadcast_to(np.eye(2), (B, 2, 2)).copy()
-            bg = np.zeros((B, 2))
-        else:
-            start = self.start_positions(rng, th0, b0, self.follower_noise)
-        return {"start": start, "goal_theta": thg, "goal_b": bg, **self.empty_obstacles(B)}
+            params.update(start=start, goal_theta=np.broadcast_to(np.eye(2), (B, 2, 2)).copy(), goal_b=np.zeros((B, 2)))
+            return params, None
+        return params, (th0, raw["b0"])
 
 
 def make(fw: Any, **kwargs: Any) -> Hold:

@@ -28,7 +28,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ._base import Array, Scenario, rotation_2d, rotation_3d, uniform
+from ._base import Array, Draw, Scenario, rotation_2d, rotation_3d
 
 __all__ = ["WINDOWS", "Maneuver", "make", "smoothstep"]
 
@@ -67,27 +67,40 @@ class Maneuver(Scenario):
         self.follower_noise = float(kw.pop("follower_noise", 0.05))
         self._win = {k: (a * self.horizon, b * self.horizon) for k, (a, b) in WINDOWS.items()}
 
-    def reset(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
+    def draws(self) -> list[Draw]:
         d = self.d
-        direction = rng.normal(size=(B, d))
-        direction /= np.linalg.norm(direction, axis=-1, keepdims=True)
-        angle0 = uniform(rng, (-np.pi, np.pi), B)
+        out = [
+            Draw("direction", (d,), "normal"),
+            Draw("angle0", bounds=(-np.pi, np.pi)),
+            Draw("b0", (d,), bounds=self.start_b),
+            Draw("offset_length", bounds=self.offset_length),
+            Draw("rotation", bounds=self.rotation),
+            Draw("sign", kind="sign"),
+            Draw("scale", (d,), bounds=self.scale),
+            Draw("shear", bounds=self.shear),
+        ]
+        if d == 3:
+            out += [Draw("axis0", (3,), "normal"), Draw("axis", (3,), "normal")]
+        return out + self.follower_draws()
+
+    def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
+        direction = raw["direction"] / np.linalg.norm(raw["direction"], axis=-1, keepdims=True)
+        B = direction.shape[0]
         params = {
-            "b0": uniform(rng, self.start_b, (B, d)),
-            "offset": direction * uniform(rng, self.offset_length, B)[:, None],
-            "angle": uniform(rng, self.rotation, B) * rng.choice([-1.0, 1.0], size=B),
-            "scale": uniform(rng, self.scale, (B, d)),
-            "shear": uniform(rng, self.shear, B),
+            "b0": raw["b0"],
+            "offset": direction * raw["offset_length"][:, None],
+            "angle": raw["rotation"] * raw["sign"],
+            "scale": raw["scale"],
+            "shear": raw["shear"],
         }
-        if d == 2:
-            params["theta0"] = rotation_2d(angle0)
+        if self.d == 2:
+            params["theta0"] = rotation_2d(raw["angle0"])
         else:
-            params["theta0"] = rotation_3d(rng.normal(size=(B, 3)), angle0)
-            params["axis"] = rng.normal(size=(B, 3))
-        theta, b = self.reference(params, np.zeros(B))
-        params["start"] = self.start_positions(rng, theta, b, self.follower_noise)
+            params["theta0"] = rotation_3d(raw["axis0"], raw["angle0"])
+            params["axis"] = raw["axis"]
+        pose = self.reference(params, np.zeros(B))
         params.update(self.empty_obstacles(B))
-        return params
+        return params, pose
 
     def reference(self, params: dict[str, Array], t: Array) -> tuple[Array, Array]:
         w = self._win

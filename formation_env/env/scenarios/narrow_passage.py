@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ._base import Array, Scenario, affine_batch, rotation_2d, uniform
+from ._base import Array, Draw, Scenario, affine_batch, rotation_2d
 
 if TYPE_CHECKING:
     from ..engine import Engine, EngineState
@@ -62,22 +62,32 @@ class NarrowPassage(Scenario):
                 stacklevel=3,
             )
 
-    def reset(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
-        wall = uniform(rng, self.wall_x, B)
-        yc = uniform(rng, self.gap_center, B)
-        w = uniform(rng, self.gap_width, B)
-        b0 = np.stack([uniform(rng, self.start_x, B), uniform(rng, self.start_y, B)], -1)
-        th0 = rotation_2d(uniform(rng, self.angle, B))
-        bg = np.stack([uniform(rng, self.goal_x, B), uniform(rng, self.goal_y, B)], -1)
-        thg = rotation_2d(uniform(rng, self.angle, B))
+    def draws(self) -> list[Draw]:
+        return [
+            Draw("wall_x", bounds=self.wall_x),
+            Draw("gap_center", bounds=self.gap_center),
+            Draw("gap_width", bounds=self.gap_width),
+            Draw("start_x", bounds=self.start_x),
+            Draw("start_y", bounds=self.start_y),
+            Draw("angle0", bounds=self.angle),
+            Draw("goal_x", bounds=self.goal_x),
+            Draw("goal_y", bounds=self.goal_y),
+            Draw("angle_g", bounds=self.angle),
+            *self.follower_draws(),
+        ]
+
+    def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
+        wall, yc, w = raw["wall_x"], raw["gap_center"], raw["gap_width"]
+        B = wall.shape[0]
+        b0 = np.stack([raw["start_x"], raw["start_y"]], -1)
+        bg = np.stack([raw["goal_x"], raw["goal_y"]], -1)
         lo, hi = self.bounds[0, 1], self.bounds[1, 1]
         seg = np.empty((B, 2, 2, 2))
         seg[:, :, :, 0] = wall[:, None, None]
         seg[:, 0, 0, 1], seg[:, 0, 1, 1] = lo, yc - w / 2
         seg[:, 1, 0, 1], seg[:, 1, 1, 1] = yc + w / 2, hi
-        return {
-            "start": self.start_positions(rng, th0, b0, self.follower_noise),
-            "goal_theta": thg,
+        params = {
+            "goal_theta": rotation_2d(raw["angle_g"]),
             "goal_b": bg,
             "segments": seg,
             "circles": np.zeros((B, 0, 3)),
@@ -85,6 +95,7 @@ class NarrowPassage(Scenario):
             "gap_center": yc,
             "gap_width": w,
         }
+        return params, (rotation_2d(raw["angle0"]), b0)
 
     def param_vector(self, params: dict[str, Array]) -> Array:
         return np.stack([params["wall_x"], params["gap_center"], params["gap_width"]], -1)

@@ -20,7 +20,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ._base import Array, Scenario, rotation_2d, rotation_3d, uniform
+from ._base import Array, Draw, Scenario, rotation_2d, rotation_3d
 
 __all__ = ["ObstacleField", "make"]
 
@@ -43,32 +43,37 @@ class ObstacleField(Scenario):
         self.angle = tuple(kw.pop("angle", (-np.pi / 12, np.pi / 12)))
         self.follower_noise = float(kw.pop("follower_noise", 0.1))
 
-    def _rotation(self, rng: np.random.Generator, B: int) -> Array:
-        a = uniform(rng, self.angle, B)
-        return rotation_2d(a) if self.d == 2 else rotation_3d(np.tile([0.0, 0.0, 1.0], (B, 1)), a)
-
-    def _pose_b(self, rng: np.random.Generator, xr: tuple[float, float], B: int) -> Array:
-        return np.concatenate([uniform(rng, xr, (B, 1)), uniform(rng, self.lateral, (B, self.d - 1))], -1)
-
-    def reset(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
+    def draws(self) -> list[Draw]:
         d, c = self.d, self.n_obstacles
-        circles = np.concatenate(
-            [
-                uniform(rng, self.obstacle_x, (B, c, 1)),
-                uniform(rng, self.obstacle_y, (B, c, d - 1)),
-                uniform(rng, self.obstacle_radius, (B, c, 1)),
-            ],
-            -1,
-        )
-        th0, b0 = self._rotation(rng, B), self._pose_b(rng, self.start_x, B)
-        thg, bg = self._rotation(rng, B), self._pose_b(rng, self.goal_x, B)
-        return {
-            "start": self.start_positions(rng, th0, b0, self.follower_noise),
-            "goal_theta": thg,
+        return [
+            Draw("obstacle_x", (c, 1), bounds=self.obstacle_x),
+            Draw("obstacle_y", (c, d - 1), bounds=self.obstacle_y),
+            Draw("obstacle_radius", (c, 1), bounds=self.obstacle_radius),
+            Draw("angle0", bounds=self.angle),
+            Draw("start_x", (1,), bounds=self.start_x),
+            Draw("start_lateral", (d - 1,), bounds=self.lateral),
+            Draw("angle_g", bounds=self.angle),
+            Draw("goal_x", (1,), bounds=self.goal_x),
+            Draw("goal_lateral", (d - 1,), bounds=self.lateral),
+            *self.follower_draws(),
+        ]
+
+    def _rotation(self, angle: Array) -> Array:
+        if self.d == 2:
+            return rotation_2d(angle)
+        return rotation_3d(np.tile([0.0, 0.0, 1.0], (angle.shape[0], 1)), angle)
+
+    def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
+        circles = np.concatenate([raw["obstacle_x"], raw["obstacle_y"], raw["obstacle_radius"]], -1)
+        b0 = np.concatenate([raw["start_x"], raw["start_lateral"]], -1)
+        bg = np.concatenate([raw["goal_x"], raw["goal_lateral"]], -1)
+        params = {
+            "goal_theta": self._rotation(raw["angle_g"]),
             "goal_b": bg,
-            "segments": np.zeros((B, 0, 2, d)),
+            "segments": np.zeros((circles.shape[0], 0, 2, self.d)),
             "circles": circles,
         }
+        return params, (self._rotation(raw["angle0"]), b0)
 
     def param_vector(self, params: dict[str, Array]) -> Array:
         return params["circles"].reshape(params["circles"].shape[0], -1)

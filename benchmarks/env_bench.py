@@ -5,11 +5,12 @@
   (N = 3, continuous actions), both through the parallel API with dict actions; ``hold`` (no
   obstacles) beside it. Target >= 10x.
 * (b) Batched: ``FormationVecEnv`` at B = 1024 on a 10-agent framework (3 leaders, 7 followers,
-  complete graph), observations and rewards computed, auto-reset included, against VMAS on CPU
-  (``simple_spread`` and ``navigation``, 10 agents, no resets), VMAS timed with torch's default
-  threads, ``torch.set_num_threads(2)`` and 1 (a row per distinct count); then all of (b) again
-  in a subprocess with numpy's OpenBLAS on one thread (``OPENBLAS_NUM_THREADS=1``).
-  Env-steps/s = B / step time. Target >= 3x.
+  complete graph), observations and rewards computed, auto-reset included (warmed up, so that
+  episodes end and restart every step as in training), against VMAS on CPU at the same B:
+  ``simple_spread`` and ``navigation`` with 10 agents, and ``simple_spread`` with its default 3
+  agents (no resets), VMAS timed with torch's default threads, ``torch.set_num_threads(2)`` and 1
+  (a row per distinct count); then all of (b) again in a subprocess with numpy's OpenBLAS on one
+  thread (``OPENBLAS_NUM_THREADS=1``). Env-steps/s = B / step time. Target >= 3x.
 * (c) SB3 PPO end to end (``learn``): the commander env (``FormationCommander-v0``) against
   ``Pendulum-v1`` with the same PPO settings, one env each, alternated. Target >= 0.9x.
 * (d) Large swarms: core step with a sparse stress at n = 10,000 (< 1 ms), constructive design

@@ -78,6 +78,12 @@ class FollowerLaw(ABC):
         self.dynamics = dynamics
         self.dt = float(dt)
         self.A_d, self.B_d = dynamics.zoh(dt)
+        # Leader and follower rows: slices (views, no copies) where the indices are consecutive, as in
+        # trilateration frameworks; and the transposed sampled matrices, skipping A_d where it is I.
+        self._rows_l = _as_slice(part.leaders)
+        self._rows_f = _as_slice(part.followers)
+        self._A_t = None if np.array_equal(self.A_d, np.eye(self.A_d.shape[0])) else np.ascontiguousarray(self.A_d.T)
+        self._B_t = np.ascontiguousarray(self.B_d.T)
         # Rows of Omega belonging to the followers, for (Omega x)_f in one matmul.
         om = part.omega
         if part.sparse:
@@ -107,9 +113,9 @@ class FollowerLaw(ABC):
         """
         u_f, memory = self.control(x, u_leaders, memory)
         out = np.empty_like(x)
-        part = self.part
-        out[..., part.leaders, :] = x[..., part.leaders, :] @ self.A_d.T + u_leaders @ self.B_d.T
-        out[..., part.followers, :] = x[..., part.followers, :] @ self.A_d.T + u_f @ self.B_d.T
+        for rows, u in ((self._rows_l, u_leaders), (self._rows_f, u_f)):
+            xr = x[..., rows, :]
+            out[..., rows, :] = (xr if self._A_t is None else xr @ self._A_t) + u @ self._B_t
         return out, memory
 
     # ------------------------------------------------------------------ analysis
@@ -124,6 +130,14 @@ class FollowerLaw(ABC):
     @abstractmethod
     def closed_loop(self) -> Array:
         """The full closed-loop matrix of the follower error (and memory) state."""
+
+
+def _as_slice(idx: Any) -> slice | NDArray[np.int64]:
+    """Indices as a slice when they are consecutive and increasing (a view instead of a copy), else an array."""
+    arr = np.asarray(idx, dtype=np.int64)
+    if arr.size and np.array_equal(arr, np.arange(arr[0], arr[0] + arr.size)):
+        return slice(int(arr[0]), int(arr[0]) + arr.size)
+    return arr
 
 
 def _sparse_left_matmul(mat: Any, x: Array) -> Array:

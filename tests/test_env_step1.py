@@ -165,3 +165,19 @@ def test_compiled_steps_keep_one_signature_each():
             eng.step(sub, np.zeros((1, eng.n_l, eng.p)))
     assert len(_kernel.step1.signatures) == 1
     assert len(_kernel.batch.signatures) == 1
+
+
+@pytest.mark.parametrize("scenario", ["narrow_passage", "obstacle_field", "maneuver_3d"])
+def test_compiled_global_state_equals_numpy(scenario, monkeypatch):
+    eng = Engine(scenario, "double_integrator", "dynamic")
+    for B in (1, 5):
+        s = eng.reset(np.random.default_rng(0), B)
+        for t in range(20):
+            s = eng.step(s, np.random.default_rng(t).uniform(-1, 1, (B, eng.n_l, eng.p)))[0]
+            fast = eng.global_state(s)
+            with monkeypatch.context() as m:
+                m.setattr(_kernel, "AVAILABLE", False)
+                ref = eng.global_state(s)
+            assert fast.dtype == ref.dtype == np.float32 and fast.shape == (B, eng.state_dim)
+            np.testing.assert_allclose(fast, ref, rtol=1e-6, atol=1e-6)
+            assert np.all(fast >= eng.state_low) and np.all(fast <= eng.state_high)

@@ -382,3 +382,48 @@ def batch(
                 for j in range(w_tail.shape[1]):
                     rew[b, j] += f * w_tail[i, j]
     return obs, dist, flags, rew
+
+
+@njit(cache=True)
+def global_state(
+    pos: np.ndarray,
+    vel: np.ndarray,
+    ref: np.ndarray,
+    err: np.ndarray,
+    theta_map: np.ndarray,
+    pvec: np.ndarray,
+    k: np.ndarray,
+    inv_cycles: float,
+    lo: np.ndarray,
+    hi: np.ndarray,
+) -> np.ndarray:
+    """``Engine.global_state``: [pos, vel, goal, goal velocity, err, Theta, scenario parameters, k / max_cycles]
+    per env, clipped to [lo, hi] in float64, as float32 (B, state_dim). pos, vel (B, n d); ref (B, 2 n d + 2);
+    err (B,); theta_map (n d, d d): Theta (row-major) from pos; pvec (B, kp); k (B,)."""
+    B, nd = pos.shape
+    dd, kp = theta_map.shape[1], pvec.shape[1]
+    out = np.empty((B, lo.shape[0]), dtype=np.float32)
+    for b in range(B):
+        j = 0
+        for i in range(nd):
+            out[b, j] = min(max(pos[b, i], lo[j]), hi[j])
+            j += 1
+        for i in range(nd):
+            out[b, j] = min(max(vel[b, i], lo[j]), hi[j])
+            j += 1
+        for i in range(2 * nd):
+            out[b, j] = min(max(ref[b, i], lo[j]), hi[j])
+            j += 1
+        out[b, j] = min(max(err[b], lo[j]), hi[j])
+        j += 1
+        for t in range(dd):
+            acc = 0.0
+            for i in range(nd):
+                acc += pos[b, i] * theta_map[i, t]
+            out[b, j] = min(max(acc, lo[j]), hi[j])
+            j += 1
+        for i in range(kp):
+            out[b, j] = min(max(pvec[b, i], lo[j]), hi[j])
+            j += 1
+        out[b, j] = min(max(k[b] * inv_cycles, lo[j]), hi[j])
+    return out

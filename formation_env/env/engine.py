@@ -864,6 +864,19 @@ class Engine:
         velocities of all agents, formation error, fitted Theta (row-major), scenario parameters, time fraction."""
         B = state.batch_size
         pos = state.pos.reshape(B, -1)
+        if _kernel.AVAILABLE:
+            return _kernel.global_state(
+                np.ascontiguousarray(pos),
+                np.ascontiguousarray(state.vel.reshape(B, -1)),
+                np.ascontiguousarray(state.ref),
+                np.ascontiguousarray(state.err),
+                self._theta_map,
+                state.params["_pvec"],
+                state.k,
+                1.0 / self._max_cycles,
+                self._state_lo64,
+                self._state_hi64,
+            )
         parts = [
             pos,
             state.vel.reshape(B, -1),

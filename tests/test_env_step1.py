@@ -181,3 +181,29 @@ def test_compiled_global_state_equals_numpy(scenario, monkeypatch):
             assert fast.dtype == ref.dtype == np.float32 and fast.shape == (B, eng.state_dim)
             np.testing.assert_allclose(fast, ref, rtol=1e-6, atol=1e-6)
             assert np.all(fast >= eng.state_low) and np.all(fast <= eng.state_high)
+
+
+def test_step_infos_are_scalar_and_copy_cheaply():
+    """The commander's and the PettingZoo env's infos hold immutable scalars only, so that their deepcopy (SB3's
+    DummyVecEnv makes one per step) can be a plain copy."""
+    import copy
+
+    import gymnasium as gym
+
+    import formation_env  # noqa: F401  (registers the commander)
+    from formation_env import formation_v0
+    from formation_env.env.engine import StepInfo
+
+    cmd = gym.make("formation_env/FormationCommander-v0")
+    cmd.reset(seed=0)
+    info = cmd.step(cmd.action_space.sample())[4]
+    pz = formation_v0.parallel_env()
+    pz.reset(seed=0)
+    infos = pz.step({a: pz.action_space(a).sample() for a in pz.agents})[4]
+    for inf in [info, *infos.values()]:
+        assert isinstance(inf, StepInfo)
+        assert all(isinstance(v, bool | int | float) for v in inf.values()), inf
+        dup = copy.deepcopy(inf)
+        assert dup == inf and dup is not inf and type(dup) is StepInfo
+        dup["success"] = "changed"
+        assert inf["success"] != "changed"

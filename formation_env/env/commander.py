@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 from formation_env.core.errors import FormationError
 
 from .control import track_targets
-from .engine import Engine, EngineState
+from .engine import Engine, EngineState, StepInfo
 from .scenarios._base import affine_batch, rotation_3d
 
 __all__ = ["ACTION_MODES", "FormationCommanderEnv"]
@@ -192,8 +192,9 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             self._advance_pose(a)
             after = affine_batch(rl, self._theta(), self._pose["b"])
             leader_a = track_targets(eng, self._state, after, (after - before) / eng.dt)[0]
-        self._state, _, rew, term, trunc, out = eng.step1(self._state, leader_a, observe=False)
-        out["control_effort"] = sum(out["control_effort"])
+        self._state, _, rew, term, trunc, info = eng.step1(self._state, leader_a, observe=False)
+        out = StepInfo(info)
+        out["control_effort"] = sum(info["control_effort"])
         self._trail.append(self._state.pos[0])
         del self._trail[:-60]
         if self.render_mode == "human":

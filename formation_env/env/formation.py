@@ -12,7 +12,7 @@ from pettingzoo import ParallelEnv
 
 from formation_env.core.errors import FormationError
 
-from .engine import Engine, EngineState
+from .engine import Engine, EngineState, StepInfo
 
 __all__ = ["FormationEnv"]
 
@@ -219,12 +219,13 @@ class FormationEnv(ParallelEnv, EzPickle):
         self._state = state
         agents = self.possible_agents
         effort = info.pop("control_effort")
+        infos: dict[str, dict[str, Any]] = {ag: StepInfo(info, control_effort=effort[i]) for i, ag in self._index}
         out = (
             {ag: o[i] for i, ag in self._index},
             dict(zip(agents, rew, strict=True)),
             dict.fromkeys(agents, t),
             dict.fromkeys(agents, tr),
-            {ag: {**info, "control_effort": effort[i]} for i, ag in self._index},
+            infos,
         )
         if t or tr:
             self.agents = []

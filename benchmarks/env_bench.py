@@ -3,7 +3,9 @@
 * (a) PettingZoo parallel step: ``formation_v0`` (narrow_passage, 5 agents: 3 leaders, 2 followers
   inside, double integrators, walls and 16 rays per leader) against MPE2 ``simple_spread_v3``
   (N = 3, continuous actions), both through the parallel API with dict actions; ``hold`` (no
-  obstacles) beside it. Target >= 10x.
+  obstacles) beside it. Target >= 10x. Beside it, the engine's single-env step compiled
+  (``Engine.step1``) against the numpy folded step it is tested against, and (for (c)) the
+  commander env's step against Pendulum-v1's.
 * (b) Batched: ``FormationVecEnv`` at B = 1024 on a 10-agent framework (3 leaders, 7 followers,
   complete graph), observations and rewards computed, auto-reset included (warmed up, so that
   episodes end and restart every step as in training), against VMAS on CPU at the same B:
@@ -91,18 +93,16 @@ def _ratio(ours: list[float], theirs: list[float]) -> tuple[float, float, float]
 
 
 def _compare_rows(
-    section: str, rates: dict[str, list[float]], ours: str, unit: str, target: float, labels: dict[str, str]
+    section: str, rates: dict[str, list[float]], ours: str, unit: str, target: float | None, labels: dict[str, str]
 ) -> list[Row]:
+    """A row for ``ours`` and one per peer with the ratio ours / peer (and the target, if there is one)."""
     rows = [_row(section, labels[ours], unit, rates[ours])]
     for name, r in rates.items():
         if name == ours:
             continue
         med, lo, hi = _ratio(rates[ours], r)
-        rows.append(
-            _row(
-                section, labels[name], unit, r, ratio=med, ratio_min=lo, ratio_max=hi, target=target, met=med >= target
-            )
-        )
+        goal = {} if target is None else {"target": target, "met": med >= target}
+        rows.append(_row(section, labels[name], unit, r, ratio=med, ratio_min=lo, ratio_max=hi, **goal))
     return rows
 
 
@@ -169,6 +169,52 @@ def bench_parallel(quick: bool) -> list[Row]:
     for ours, other in (("narrow_passage", "hold"), ("hold", "narrow_passage")):
         out += _compare_rows("a", {k: v for k, v in rates.items() if k != other}, ours, "steps/s", 10.0, labels)
     return out + rows
+
+
+def bench_single(quick: bool) -> list[Row]:
+    """The single-env step behind (a) and (c): ``Engine.step1`` (compiled) against the numpy folded step on the
+    same B = 1 state (the reference it is tested against), and the commander env's step against Pendulum-v1's
+    (``gym.make`` both, random actions, resets included)."""
+    import gymnasium as gym
+
+    import formation_env  # noqa: F401  (registers the commander)
+    from formation_env.env.engine import Engine
+
+    eng = Engine("narrow_passage")
+    fast = eng.reset(np.random.default_rng(0), 1)
+    ref = fast._replace(params={k: v for k, v in fast.params.items() if k != "_M1"})  # no folded map: numpy
+    a = np.full((eng.n_l, eng.p), 0.1)
+    a3 = a[None]
+
+    def numpy_step() -> None:
+        eng._kbatch = False
+        eng.step(ref, a3)
+        eng._kbatch = True
+
+    fns: dict[str, Callable[[], None]] = {"step1": lambda: eng.step1(fast, a), "numpy": numpy_step}
+    for name, gid in (("commander", "formation_env/FormationCommander-v0"), ("pendulum", "Pendulum-v1")):
+        env = gym.make(gid)
+        env.reset(seed=0)
+        pool = [env.action_space.sample() for _ in range(64)]
+        env.action_space.seed(0)
+
+        def step(env: Any = env, pool: list[Any] = pool, c: list[int] = [0]) -> None:  # noqa: B006
+            _, _, te, tr, _ = env.step(pool[c[0] & 63])
+            c[0] += 1
+            if te or tr:
+                env.reset()
+
+        fns[name] = step
+    rates = _rates(fns, dict.fromkeys(fns, 1.0), 500 if quick else 2000, 5 if quick else 9)
+    labels = {
+        "step1": "Engine.step1, narrow_passage (n=5), B=1, compiled",
+        "numpy": "Engine.step, same state, numpy folded step (the reference)",
+        "commander": "gym.make(FormationCommander-v0) step, random actions, resets included",
+        "pendulum": "gym.make(Pendulum-v1) step, random actions, resets included",
+    }
+    rows = _compare_rows("a", {k: rates[k] for k in ("step1", "numpy")}, "step1", "steps/s", None, labels)
+    rows += _compare_rows("c", {k: rates[k] for k in ("commander", "pendulum")}, "commander", "steps/s", None, labels)
+    return rows
 
 
 # ---------------------------------------------------------------------------- (b) batched
@@ -592,7 +638,15 @@ def bench_batched_single_blas(quick: bool) -> list[Row]:
 def run(quick: bool = False) -> list[Row]:
     """All env benchmarks; each section runs in turn, comparisons interleaved within a section."""
     rows: list[Row] = []
-    for fn in (bench_parallel, bench_batched, bench_batched_single_blas, bench_ppo, bench_large, bench_leak):
+    for fn in (
+        bench_parallel,
+        bench_single,
+        bench_batched,
+        bench_batched_single_blas,
+        bench_ppo,
+        bench_large,
+        bench_leak,
+    ):
         print(f"[env] {fn.__name__} ...", file=sys.stderr, flush=True)
         with contextlib.suppress(KeyboardInterrupt):
             rows += fn(quick)

@@ -335,3 +335,20 @@ def test_geometry_helpers():
     np.testing.assert_allclose(vec[0, 0], [[0.5, 0, 0], [0, 0, 0]])
     d = geometry.fibonacci_directions(50)
     np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0)
+
+
+def test_dense_path_fits_the_world_to_a_large_framework():
+    """A framework too large for the world box (here 200 agents, dense path): ``hold`` grows its world, so the
+    agents start inside it; ``narrow_passage`` (fixed walls) refuses it and says what to do."""
+    from formation_env.core.frameworks import trilateration
+
+    fw = trilateration(200, 2, seed=0)
+    eng = Engine("hold", "single_integrator", "stationary", framework=fw, agent_radius=0.01)
+    assert not eng.sparse and eng.bounds[1, 0] > 7.0
+    s = eng.reset(np.random.default_rng(0), 2)
+    lo, hi = eng.bounds
+    assert np.all(s.pos > lo) and np.all(s.pos < hi)
+    info = eng.step(s, np.zeros((2, eng.n_l, eng.p)))[5]
+    assert not info["out_of_bounds"].any()
+    with pytest.raises(FormationError, match="scale its positions"):
+        Engine("narrow_passage", framework=fw, agent_radius=0.01)

@@ -382,10 +382,9 @@ class Engine:
         self.scenario: Scenario = REGISTRY[scenario](
             fw, agent_radius=self.agent_radius, horizon=self.dt * self._max_cycles, **scenario_kwargs
         )
-        if self.sparse:
-            from . import swarm
+        from . import swarm
 
-            swarm.fit_world(self.scenario)
+        swarm.fit_world(self.scenario)  # a framework too large for the world: grow it, or refuse the framework
         weights = dict(self.scenario.reward_weights)
         for kk, vv in (reward_weights or {}).items():
             if kk not in REWARD_TERMS:

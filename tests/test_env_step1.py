@@ -207,3 +207,26 @@ def test_step_infos_are_scalar_and_copy_cheaply():
         assert dup == inf and dup is not inf and type(dup) is StepInfo
         dup["success"] = "changed"
         assert inf["success"] != "changed"
+
+
+@pytest.mark.parametrize(("scenario", "dynamics", "law"), offered_combinations()[::2])
+def test_compiled_observe_and_reset_equal_numpy(scenario, dynamics, law):
+    """``observe`` and the reset's goal distances and formation error, compiled against numpy."""
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    eng = Engine(scenario, dynamics, law)
+    eng._kbatch = False
+    ref = eng.reset(np.random.default_rng(7), 3)
+    eng._kbatch = True
+    fast = eng.reset(np.random.default_rng(7), 3)
+    np.testing.assert_allclose(fast.goal_dist, ref.goal_dist, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(fast.err, ref.err, rtol=1e-9, atol=1e-12)
+    s = fast
+    for t in range(5):
+        s = eng.step(s, np.random.default_rng(t).uniform(-1, 1, (3, eng.n_l, eng.p)))[0]
+        got = eng.observe(s)
+        eng._kbatch = False
+        want = eng.observe(s)
+        eng._kbatch = True
+        assert got.dtype == want.dtype == np.float32
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)

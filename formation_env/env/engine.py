@@ -740,8 +740,12 @@ class Engine:
             self._fold_episode(params)
         for arr in params.values():
             arr.setflags(write=False)
-        geo = self._features(*self._aug(start), params, ref)
-        nv = self._norms(geo)
+        if self._kbatch:
+            dist = self._measure_compiled(start, np.zeros_like(start), ref, params)[1]
+            goal_dist, err = dist[:, : self.n_l], dist[:, self.n_l]
+        else:
+            nv = self._norms(self._features(*self._aug(start), params, ref))
+            goal_dist, err = nv[:, self._kc : self._kc + self.n_l], nv[:, -1]
         at_rest = self.__dict__.get("_at_rest")  # x at rest from positions: dynamics.state_from_position, cached
         if at_rest is None:
             at_rest = self.__dict__["_at_rest"] = np.linalg.pinv(self.dynamics.C).T
@@ -752,8 +756,8 @@ class Engine:
             memory=self.law.initial_memory((B,)),
             k=k,
             ref=ref,
-            goal_dist=nv[:, self._kc : self._kc + self.n_l],
-            err=nv[:, -1],
+            goal_dist=goal_dist,
+            err=err,
             streak=np.zeros(B, dtype=np.int64),
             params=params,
         )
@@ -865,6 +869,8 @@ class Engine:
         """Observations of every leader, shape (B, n_l, obs_dim), float32 (layout: ``obs_blocks``)."""
         if self._swarm is not None:
             return self._swarm.observe(state)
+        if self._kbatch:
+            return self._measure_compiled(state.pos, state.vel, state.ref, state.params)[0]
         B = state.batch_size
         pos1, paug, laug = self._aug(state.pos)
         geo = self._features(pos1, paug, laug, state.params, state.ref)
@@ -1081,6 +1087,48 @@ class Engine:
             arr = np.zeros(shape) if self._const_sense is None else np.broadcast_to(self._const_sense, shape).copy()
             self._sense_cache[key] = arr
         return arr
+
+    def _measure_compiled(
+        self, pos: Array, vel: Array, ref: Array, params: dict[str, Array]
+    ) -> tuple[NDArray[np.float32], Array]:
+        """Observations (B, n_l, obs_dim) and the kernel's distances (B, n_l + 4: leader goal distances,
+        formation error, ...) of positions ``pos`` and velocities ``vel`` (B, n, d) with exogenous row ``ref``
+        (``_kernel.batch`` with nothing moving and no actions): ``observe`` and resets, compiled."""
+        B, nl = pos.shape[0], self.n_l
+        pos = np.ascontiguousarray(pos)
+        if self._bmode == _kernel.SENSE_GIVEN:
+            laug = np.concatenate([pos[:, self.leaders], np.ones((B, nl, 1))], axis=2)
+            sense = np.ascontiguousarray(self._sense(laug, params))
+        else:
+            sense = self._sense_fill(B)
+        walls = params["_W"] if self.n_seg else self._no_walls
+        obs, dist, _, _ = _kernel.batch(
+            pos,
+            pos,
+            np.ascontiguousarray(vel),
+            np.ascontiguousarray(ref),
+            np.zeros((B, nl * self.p)),
+            np.zeros((B, nl)),
+            params["circles"],
+            walls,
+            params["_R"] if self._bmode == _kernel.SENSE_WALLS else walls,
+            params["_thr"],
+            self._pairs,
+            self.leaders,
+            self._perm,
+            self.affine._pinv,
+            self._hfit,
+            self._box,
+            self._fast,
+            1.0 / self._max_cycles,
+            self._lin_lo2,
+            self._lin_hi2,
+            self._err_hi,
+            self._w_tail,
+            sense,
+            self._bmode,
+        )
+        return obs, dist
 
     def _step_batch(
         self, state: EngineState, actions: ArrayLike

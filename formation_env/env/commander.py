@@ -195,8 +195,9 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._state, _, rew, term, trunc, info = eng.step1(self._state, leader_a, observe=False)
         out = StepInfo(info)
         out["control_effort"] = sum(info["control_effort"])
-        self._trail.append(self._state.pos[0])
-        del self._trail[:-60]
+        if self.render_mode is not None:  # the trail is drawn only
+            self._trail.append(self._state.pos[0])
+            del self._trail[:-60]
         if self.render_mode == "human":
             self.render()
         return self._obs(), sum(rew) / len(rew), term, trunc, out

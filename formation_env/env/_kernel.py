@@ -80,7 +80,7 @@ def step1(
         sense_in: the sensing when ``sense_mode`` is SENSE_CONST or SENSE_GIVEN, shape (n_l, ks).
         gprev: the leaders' goal distances before the step (n_l,), m.
         w_tail: the reward map's rows for [a^2 (n_l p), gprev, goal distances after], shape (., 2 n_l).
-        lin_lo, lin_hi: bounds of the linear observation entries, shape (n_l L1,).
+        lin_lo, lin_hi: bounds of the linear observation entries, shape (n_l, L1).
         err_hi: bound of the formation-error entry (m).
         lay: int64 layout, the fields ``LAYOUT``.
     Returns:
@@ -148,8 +148,8 @@ def step1(
     for li in range(nl):
         for j in range(L1):
             v = out[obs0 + li * L1 + j]
-            lo = lin_lo[li * L1 + j]
-            hi = lin_hi[li * L1 + j]
+            lo = lin_lo[li, j]
+            hi = lin_hi[li, j]
             if v < lo:
                 v = lo
             if v > hi:

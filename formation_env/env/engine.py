@@ -452,8 +452,8 @@ class Engine:
             self._swarm = swarm.SwarmStep(self)
             self._fast1 = self._kbatch = False  # the compiled paths use the folded (dense) matrices
         else:
-            self._build_fast1()
             self._build_kernel_batch()
+            self._build_fast1()
 
     # ------------------------------------------------------------------ construction
     @property
@@ -681,6 +681,8 @@ class Engine:
         self.obs_high = np.concatenate(hi).astype(np.float32)
         self._lin_lo = self.obs_low[: self.L1].astype(np.float64)
         self._lin_hi = self.obs_high[: self.L1].astype(np.float64)
+        self._lin_lo2 = np.tile(self._lin_lo, (nl, 1))  # per leader (n_l, L1), for the compiled steps
+        self._lin_hi2 = np.tile(self._lin_hi, (nl, 1))
         self._err_hi = float(self.obs_high[self.L1])
         sc = self.scenario
         s_lo: list[ArrayLike] = [np.tile(lo_w, n), np.full(n * d, -v), np.tile(lo_w, n), np.full(n * d, -v), [0.0]]
@@ -711,6 +713,8 @@ class Engine:
         wr[3 + nlp + np.arange(nl), np.arange(nl)] = w["progress"]
         wr[3 + nlp + nl + np.arange(nl), np.arange(nl)] = -w["progress"] - w["distance"] * self.dt
         self._w_rew = wr
+        self._w_tail = np.ascontiguousarray(wr[3:])  # the compiled steps: rows of [a^2, goal distances before, after]
+        self._w_head = [float(w) for w in wr[:3, 0]]  # and the success, collision, formation weights (all leaders)
 
     # ------------------------------------------------------------------ reset
     def reset(self, rng: np.random.Generator, B: int = 1) -> EngineState:
@@ -982,13 +986,7 @@ class Engine:
             ok = (v[:, kc:].max(axis=1) < 0.0) > collision
         else:
             ok = sc.is_success(nv[:, kc:-1].max(axis=1), err) > collision
-        if sc.hold_steps == 1:
-            streak, success = ok.astype(np.int64), ok
-        else:
-            streak = (state.streak + 1) * ok
-            success = streak >= sc.hold_steps
-        terminated = collision | success if sc.terminate_on_success else collision
-        truncated = (k >= self._max_cycles) > terminated
+        streak, success, terminated, truncated = self._episode_end(state, ok, collision, k)
         feats = np.concatenate((success[:, None], collision[:, None], err[:, None], af * af, state.goal_dist, gd_l), 1)
         re = feats @ self._w_rew
         sense = self._const_sense if self._const_sense is not None else self._sense(laug, params)
@@ -1062,10 +1060,6 @@ class Engine:
             c += w
         self._hfit = np.hstack([self.fw.positions, np.ones((n, 1))])
         self._box = np.ascontiguousarray(np.stack(self.bounds).astype(np.float64))
-        self._lin_lo2 = np.ascontiguousarray(np.tile(self._lin_lo, (nl, 1)))
-        self._lin_hi2 = np.ascontiguousarray(np.tile(self._lin_hi, (nl, 1)))
-        self._w_tail = np.ascontiguousarray(self._w_rew[3:])
-        self._w_head = [float(w) for w in self._w_rew[:3, 0]]  # success, collision, formation (all leaders)
         ks = self.obs_dim - self.L1 - 1
         if self._const_sense is not None:
             self._bmode = _kernel.SENSE_CONST
@@ -1089,11 +1083,19 @@ class Engine:
         return arr
 
     def _measure_compiled(
-        self, pos: Array, vel: Array, ref: Array, params: dict[str, Array]
-    ) -> tuple[NDArray[np.float32], Array]:
-        """Observations (B, n_l, obs_dim) and the kernel's distances (B, n_l + 4: leader goal distances,
-        formation error, ...) of positions ``pos`` and velocities ``vel`` (B, n, d) with exogenous row ``ref``
-        (``_kernel.batch`` with nothing moving and no actions): ``observe`` and resets, compiled."""
+        self,
+        pos: Array,
+        vel: Array,
+        ref: Array,
+        params: dict[str, Array],
+        prev: Array | None = None,
+        a2: Array | None = None,
+        gprev: Array | None = None,
+    ) -> tuple[NDArray[np.float32], Array, NDArray[np.bool_], Array]:
+        """``_kernel.batch`` on positions ``pos`` and velocities ``vel`` (B, n, d) with exogenous row ``ref``:
+        (obs (B, n_l, obs_dim), dist (B, n_l + 4), flags (B, 2), rew (B, 2 n_l)), see the kernel. ``prev``
+        (the positions before the step), ``a2`` (squared clipped actions) and ``gprev`` (goal distances before
+        the step) default to nothing moving and no actions, as for ``observe`` and resets."""
         B, nl = pos.shape[0], self.n_l
         pos = np.ascontiguousarray(pos)
         if self._bmode == _kernel.SENSE_GIVEN:
@@ -1102,13 +1104,13 @@ class Engine:
         else:
             sense = self._sense_fill(B)
         walls = params["_W"] if self.n_seg else self._no_walls
-        obs, dist, _, _ = _kernel.batch(
+        return _kernel.batch(
             pos,
-            pos,
+            pos if prev is None else np.ascontiguousarray(prev),
             np.ascontiguousarray(vel),
             np.ascontiguousarray(ref),
-            np.zeros((B, nl * self.p)),
-            np.zeros((B, nl)),
+            np.zeros((B, nl * self.p)) if a2 is None else a2,
+            np.zeros((B, nl)) if gprev is None else np.ascontiguousarray(gprev),
             params["circles"],
             walls,
             params["_R"] if self._bmode == _kernel.SENSE_WALLS else walls,
@@ -1128,7 +1130,20 @@ class Engine:
             sense,
             self._bmode,
         )
-        return obs, dist
+
+    def _episode_end(
+        self, state: EngineState, ok: NDArray[np.bool_], collision: NDArray[np.bool_], k: NDArray[np.int64]
+    ) -> tuple[NDArray[np.int64], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
+        """(streak, success, terminated, truncated), each (B,), from this sample's success test ``ok``, the
+        collisions and the new sample count ``k`` (``hold_steps`` successes in a row are a success)."""
+        sc = self.scenario
+        if sc.hold_steps == 1:
+            streak, success = ok.astype(np.int64), ok
+        else:
+            streak = (state.streak + 1) * ok
+            success = streak >= sc.hold_steps
+        terminated = collision | success if sc.terminate_on_success else collision
+        return streak, success, terminated, (k >= self._max_cycles) > terminated
 
     def _step_batch(
         self, state: EngineState, actions: ArrayLike
@@ -1150,38 +1165,7 @@ class Engine:
             ref[:, -1] = k
         pos = np.ascontiguousarray(out[:, kcol["pos"]]).reshape(B, n, d)
         vel = np.ascontiguousarray(out[:, kcol["vel"]]).reshape(B, n, d)
-        if self._bmode == _kernel.SENSE_GIVEN:
-            laug = np.concatenate([pos[:, self.leaders], np.ones((B, nl, 1))], axis=2)
-            sense = np.ascontiguousarray(self._sense(laug, params))
-        else:
-            sense = self._sense_fill(B)
-        walls = params["_W"] if self.n_seg else self._no_walls
-        obs, dist, flags, re = _kernel.batch(
-            pos,
-            np.ascontiguousarray(state.pos),
-            vel,
-            ref,
-            af * af,
-            np.ascontiguousarray(state.goal_dist),
-            params["circles"],
-            walls,
-            params["_R"] if self._bmode == _kernel.SENSE_WALLS else walls,
-            params["_thr"],
-            self._pairs,
-            self.leaders,
-            self._perm,
-            self.affine._pinv,
-            self._hfit,
-            self._box,
-            self._fast,
-            1.0 / self._max_cycles,
-            self._lin_lo2,
-            self._lin_hi2,
-            self._err_hi,
-            self._w_tail,
-            sense,
-            self._bmode,
-        )
+        obs, dist, flags, re = self._measure_compiled(pos, vel, ref, params, state.pos, af * af, state.goal_dist)
         err, clear = dist[:, nl], dist[:, nl + 2].copy()
         collision = clear < 0.0
         if flags.any():  # left the world box, or an agent was fast: swept checks
@@ -1195,13 +1179,7 @@ class Engine:
             ok = (dist[:, nl + 3] < 0.0) > collision
         else:
             ok = sc.is_success(dist[:, nl + 1], err) > collision
-        if sc.hold_steps == 1:
-            streak, success = ok.astype(np.int64), ok
-        else:
-            streak = (state.streak + 1) * ok
-            success = streak >= sc.hold_steps
-        terminated = collision | success if sc.terminate_on_success else collision
-        truncated = (k >= self._max_cycles) > terminated
+        streak, success, terminated, truncated = self._episode_end(state, ok, collision, k)
         ws, wc, wf = self._w_head
         rew = re[:, :nl] + (success * ws + collision * wc + err * wf)[:, None]
         new = EngineState(
@@ -1216,7 +1194,7 @@ class Engine:
             streak,
             params,
         )
-        info = {
+        info: dict[str, Any] = {
             "success": success,
             "collision": collision,
             "out_of_bounds": oob,
@@ -1244,13 +1222,7 @@ class Engine:
         self._paug1 = M[:, cols["paug"]].reshape(Z, n, d + 1)
         self._one_row = Z - 2  # z = [x, a, mem, ref] and ref ends with (1, k)
         self._excess = self._g["walls"].start + d * np.arange(n * S)  # Q's wall rows: (excess, across)
-        ks = self.obs_dim - self.L1 - 1
-        if self._const_sense is not None:
-            mode, self._sense_c = _kernel.SENSE_CONST, np.tile(self._const_sense, (nl, 1))
-        else:
-            walls_only = S and not self.n_circ and d == 2
-            mode, self._sense_c = (_kernel.SENSE_WALLS if walls_only else _kernel.SENSE_GIVEN), np.zeros((nl, ks))
-        self._sense_mode = mode
+        self._sense_c = self._sense_fill(1)[0]  # (n_l, ks): the constant sensing, or a dummy
         layout = {
             "kc": self._kc,
             "kd": self._kd,
@@ -1266,13 +1238,9 @@ class Engine:
             "laug0": cols["laug"].start,
             "q1": self._q1.shape[1],
             "walls0": self._g["walls"].start,
-            "sense_mode": mode,
+            "sense_mode": self._bmode,
         }
         self._layout1 = np.array([layout[k] for k in _kernel.LAYOUT], dtype=np.int64)
-        self._lin_lo1 = np.tile(self._lin_lo, nl)
-        self._lin_hi1 = np.tile(self._lin_hi, nl)
-        self._rew_tail = np.ascontiguousarray(self._w_rew[3:])
-        self._rew_head = [float(w) for w in self._w_rew[:3, 0]]  # success, collision, formation (all leaders)
         self._no_rays = np.zeros((d + 1, 0))
         self._no_rays.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
         self._no_mem = np.zeros(0)
@@ -1324,10 +1292,10 @@ class Engine:
             inf1["control_effort"] = arrays["control_effort"][0].tolist()
             return new, obs[0], rew[0].tolist(), bool(term[0]), bool(trunc[0]), inf1
         flat = a.reshape(-1)
-        if flat.size != self._rew_tail.shape[0] - 2 * self.n_l:
+        if flat.size != self._w_tail.shape[0] - 2 * self.n_l:
             self.check_actions(a if a.ndim == 3 else a[None], 1)  # raises on the shape
         cols, nl, kc, n, d = self._cols, self.n_l, self._kc, self.n, self.d
-        rays = params["_R"][0] if self._sense_mode == _kernel.SENSE_WALLS else self._no_rays
+        rays = params["_R"][0] if self._bmode == _kernel.SENSE_WALLS else self._no_rays
         out1, obs, nv, re, sc3 = _kernel.step1(
             state.x.reshape(-1),
             flat,
@@ -1339,16 +1307,16 @@ class Engine:
             rays,
             self._sense_c,
             state.goal_dist[0],
-            self._rew_tail,
-            self._lin_lo1,
-            self._lin_hi1,
+            self._w_tail,
+            self._lin_lo2,
+            self._lin_hi2,
             self._err_hi,
             self._layout1,
         )
         if sc3[3]:
             self.check_actions(a if a.ndim == 3 else a[None], 1)  # raises, naming the leader
         out = out1[None]
-        if observe and self._sense_mode == _kernel.SENSE_GIVEN:  # circles or 3D: the batched sensing
+        if observe and self._bmode == _kernel.SENSE_GIVEN:  # circles or 3D: the batched sensing
             obs[:, self.L1 + 1 :] = self._sense(out[:, cols["laug"]].reshape(1, nl, d + 1), params)[0]
         clear_f, worst, gmin, _ = sc3.tolist()
         collision_f = clear_f < 0.0
@@ -1366,7 +1334,7 @@ class Engine:
         success_f = streak_i >= sc.hold_steps
         term_f = collision_f or (success_f and sc.terminate_on_success)
         k_i = int(state.k[0]) + 1
-        ws, wc, wf = self._rew_head
+        ws, wc, wf = self._w_head
         head = success_f * ws + collision_f * wc + err * wf
         rel = re.tolist()
         new = EngineState(

@@ -343,13 +343,7 @@ class SwarmStep:
         gd_l = gd[:, eng.leaders]
         goal_distance = gd.max(axis=1)
         ok = sc.is_success(goal_distance, err) > collision
-        if sc.hold_steps == 1:
-            streak, success = ok.astype(np.int64), ok
-        else:
-            streak = (state.streak + 1) * ok
-            success = streak >= sc.hold_steps
-        terminated = collision | success if sc.terminate_on_success else collision
-        truncated = (k >= eng.max_cycles) > terminated
+        streak, success, terminated, truncated = eng._episode_end(state, ok, collision, k)
         af = a.reshape(B, -1)
         feats = np.concatenate((success[:, None], collision[:, None], err[:, None], af * af, state.goal_dist, gd_l), 1)
         re = feats @ eng._w_rew

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from formation_env.core.errors import ControlDimension
+from formation_env.core.errors import ControlDimension, FormationError
 from formation_env.env import _kernel
 from formation_env.env.engine import Engine, EngineState, offered_combinations
 
@@ -163,8 +163,49 @@ def test_compiled_steps_keep_one_signature_each():
                 s = eng.step(s, np.full((B, eng.n_l, eng.p), 0.2))[0]
             sub = eng.select(s, [0])  # a sub-batch of one, without the folded map
             eng.step(sub, np.zeros((1, eng.n_l, eng.p)))
-    assert len(_kernel.step1.signatures) == 1
-    assert len(_kernel.batch.signatures) == 1
+    for kernel in (_kernel.step1, _kernel.step_rows, _kernel.linear_rows, _kernel.measure_rows):
+        assert len(kernel.signatures) == 1, kernel
+
+
+@pytest.mark.parametrize("scenario", ["narrow_passage", "obstacle_field", "hold"])
+def test_batched_step_is_the_same_on_any_number_of_threads(scenario):
+    """B = 300 envs split over 1, 2 and 3 threads (chunks of >= 128 rows: 1, 2 and 2 chunks) give the same
+    bits, with walls, circles (sensing in numpy) and no obstacles."""
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    results = []
+    for threads in (1, 2, 3):
+        eng = Engine(scenario, "double_integrator", "dynamic", max_cycles=30, num_threads=threads)
+        rng = np.random.default_rng(2)
+        s = eng.reset(np.random.default_rng(9), 300)
+        outs = [eng.observe(s)]
+        for _ in range(12):
+            s, o, r, te, tr, info = eng.step(s, rng.uniform(-1.5, 1.5, (300, eng.n_l, eng.p)))
+            outs += [o, r, te, tr, s.x, s.pos, s.vel, s.memory, info["min_clearance"], info["out_of_bounds"]]
+        results.append(outs)
+    for other in results[1:]:
+        for a, b in zip(results[0], other, strict=True):
+            np.testing.assert_array_equal(a, b)
+
+
+def test_rows_kernels_split_into_contiguous_chunks(monkeypatch):
+    """``run_rows`` covers [0, B) once, in at most ``threads`` chunks of at least MIN_ROWS_PER_THREAD rows."""
+    seen: list[tuple[int, int]] = []
+    m = _kernel.MIN_ROWS_PER_THREAD
+    for B, threads, chunks in ((1, 4, 1), (2 * m - 1, 2, 1), (2 * m, 2, 2), (5 * m, 3, 3), (5 * m + 7, 8, 5)):
+        seen.clear()
+        _kernel.run_rows(lambda b0, b1: seen.append((b0, b1)), B, threads)
+        spans = sorted(seen)
+        assert len(spans) == chunks
+        assert spans[0][0] == 0 and spans[-1][1] == B
+        assert all(a[1] == b[0] for a, b in zip(spans, spans[1:]))
+        assert min(b1 - b0 for b0, b1 in spans) >= min(m, B)
+
+
+@pytest.mark.parametrize("bad", [0, -1, 1.5])
+def test_num_threads_must_be_a_positive_integer(bad):
+    with pytest.raises(FormationError, match="num_threads"):
+        Engine("hold", num_threads=bad)
 
 
 @pytest.mark.parametrize("scenario", ["narrow_passage", "obstacle_field", "maneuver_3d"])
@@ -230,3 +271,30 @@ def test_compiled_observe_and_reset_equal_numpy(scenario, dynamics, law):
         eng._kbatch = True
         assert got.dtype == want.dtype == np.float32
         np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)
+
+
+def _step_large_batch(queue) -> None:  # in a forked child: the parent's worker threads do not exist here
+    eng = Engine("narrow_passage", num_threads=2)
+    s = eng.reset(np.random.default_rng(0), 2 * _kernel.MIN_ROWS_PER_THREAD)
+    queue.put(float(eng.step(s, np.zeros((s.x.shape[0], eng.n_l, eng.p)))[1].sum()))
+
+
+def test_threaded_step_works_in_a_forked_child():
+    """The worker threads are made again in a child forked after the parent used them (else: a hang)."""
+    import multiprocessing as mp
+
+    if not _kernel.AVAILABLE or "fork" not in mp.get_all_start_methods():
+        pytest.skip("numba or the fork start method is missing")
+    eng = Engine("narrow_passage", num_threads=2)
+    s = eng.reset(np.random.default_rng(0), 2 * _kernel.MIN_ROWS_PER_THREAD)
+    expect = float(eng.step(s, np.zeros((s.x.shape[0], eng.n_l, eng.p)))[1].sum())  # the pool exists now
+    ctx = mp.get_context("fork")
+    queue = ctx.Queue()
+    child = ctx.Process(target=_step_large_batch, args=(queue,))
+    child.start()
+    child.join(timeout=60)
+    if child.is_alive():
+        child.kill()
+        pytest.fail("the threaded step hung in a forked child")
+    assert child.exitcode == 0
+    assert queue.get(timeout=5) == expect

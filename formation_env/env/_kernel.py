@@ -1,4 +1,4 @@
-"""The single-env (B = 1) step's nonlinear part as one compiled function (numba), for ``Engine.step1``.
+"""The engine's steps compiled (numba): the single-env step ``step1`` and the batched step's rows.
 
 At B = 1 and n = 5 a numpy step is ~35 calls of ~1-2 us each, so the call overhead, not the
 arithmetic, is the cost. ``step1`` does the whole step in one call: the two matmuls, wall
@@ -7,11 +7,21 @@ walls, observation assembly (clipped, float32) and the reward's linear part. It 
 what the batched numpy step (``Engine.step``) computes, which stays the reference: tests compare
 the two on every scenario. Without numba (``AVAILABLE`` False) ``step1`` takes the batched step.
 
+The batched step (``Engine.step`` at B > 1) is ``step_rows`` = ``linear_rows`` (the folded matmul per
+env) then ``measure_rows`` (contacts, rays, observations, rewards), over a range of env rows with
+the GIL released, so that ``run_rows`` can split a large batch over threads; the rows are
+independent, so the result does not depend on the number of threads. The matmul is not numpy's:
+OpenBLAS splits a (1024, 46) x (46, 80) product over its threads, and when another process holds
+a core that product waits for a time slice (measured: 8 ms instead of 0.25 ms on one thread).
+
 Compiled on first use and cached on disk (``cache=True``), so later processes start at once.
 """
 
 from __future__ import annotations
 
+import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -27,7 +37,19 @@ except ImportError:  # pragma: no cover - exercised only where numba is missing
         return lambda f: f
 
 
-__all__ = ["AVAILABLE", "LAYOUT", "SENSE_CONST", "SENSE_GIVEN", "SENSE_WALLS", "step1"]
+__all__ = [
+    "AVAILABLE",
+    "LAYOUT",
+    "SENSE_CONST",
+    "SENSE_GIVEN",
+    "SENSE_WALLS",
+    "default_threads",
+    "linear_rows",
+    "measure_rows",
+    "run_rows",
+    "step1",
+    "step_rows",
+]
 
 #: How ``step1`` gets the leaders' obstacle sensing: a constant, the given array, or 2D rays on walls.
 SENSE_CONST, SENSE_GIVEN, SENSE_WALLS = 0, 1, 2
@@ -189,8 +211,10 @@ def step1(
     return out, obs, nv, rew, np.array([clear, worst, gmin, 0.0])
 
 
-@njit(cache=True)
-def batch(
+@njit(cache=True, nogil=True)
+def measure_rows(
+    b0: int,
+    b1: int,
     pos: np.ndarray,
     prev: np.ndarray,
     vel: np.ndarray,
@@ -215,13 +239,19 @@ def batch(
     w_tail: np.ndarray,
     sense_in: np.ndarray,
     mode: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Everything of a batched step that is not linear in the state, per env, from the new positions.
+    obs: np.ndarray,
+    dist: np.ndarray,
+    flags: np.ndarray,
+    rew: np.ndarray,
+) -> None:
+    """Everything of a batched step that is not linear in the state, for envs b0 <= b < b1, from the new
+    positions, written into rows [b0, b1) of ``obs``, ``dist``, ``flags`` and ``rew`` (and nothing else).
 
     The same quantities as ``Engine.step``'s numpy code (the reference, compared in tests), computed
     directly from positions instead of through the folded feature matrices.
 
     Args:
+        b0, b1: the env rows to compute.
         pos, prev, vel: new positions, previous positions, new velocities, shape (B, n, d) (m, m/s).
         ref: the new exogenous row [goal (n d), goal velocity (n d), 1, k], shape (B, 2 n d + 2).
         a2: squared clipped actions (B, n_l p); gprev: goal distances before the step (B, n_l), m.
@@ -232,14 +262,14 @@ def batch(
         box (2, d): world box low and high; fast: per-axis displacement (m) above which an agent is fast.
         inv_cycles: 1 / max_cycles; lin_lo, lin_hi (n_l, L1); err_hi; w_tail: reward rows for
         [a2, gprev, goal distances]; sense_in (B, n_l, ks) used unless ``mode`` is SENSE_WALLS.
-    Returns:
+    Outputs:
         obs (B, n_l, obs_dim) float32; dist (B, n_l + 4): leader goal distances, formation error, largest
-        goal distance, min clearance, max of the success margins (nv - thr)[Kc:]; flags (B, 2): out of the
-        box, some agent fast; rew (B, 2 n_l): the reward's and effort's parts linear in [a2, gprev, dist].
+        goal distance, min clearance, max of the success margins (nv - thr)[Kc:]; flags (B, 2) bool: out of
+        the box, some agent fast; rew (B, 2 n_l): the reward's and effort's parts linear in [a2, gprev, dist].
     """
-    B, n, d = pos.shape
+    n, d = pos.shape[1], pos.shape[2]
     nl, L1 = lin_lo.shape
-    od = L1 + 1 + sense_in.shape[2]
+    od = obs.shape[2]
     C = circles.shape[1]
     S = walls.shape[2] // 3
     R = rays.shape[2] // (2 * S) if S > 0 else 0
@@ -247,13 +277,13 @@ def batch(
     kc = P + n * C + n * S
     nd = n * d
     sqn = np.sqrt(float(n))
-    obs = np.empty((B, nl, od), dtype=np.float32)
-    dist = np.empty((B, nl + 4))
-    flags = np.zeros((B, 2), dtype=np.bool_)
-    rew = np.zeros((B, w_tail.shape[1]))
     coef = np.empty((d + 1, d))
     lin = np.empty(L1)
-    for b in range(B):
+    for b in range(b0, b1):
+        flags[b, 0] = False
+        flags[b, 1] = False
+        for j in range(rew.shape[1]):
+            rew[b, j] = 0.0
         p = pos[b]
         clear = np.inf
         for k in range(P):  # agent pairs
@@ -381,7 +411,157 @@ def batch(
             if f != 0.0:
                 for j in range(w_tail.shape[1]):
                     rew[b, j] += f * w_tail[i, j]
-    return obs, dist, flags, rew
+
+
+@njit(cache=True, nogil=True)
+def linear_rows(
+    b0: int,
+    b1: int,
+    x: np.ndarray,
+    a: np.ndarray,
+    mem: np.ndarray,
+    ref: np.ndarray,
+    Mc: np.ndarray,
+    take: np.ndarray,
+    x_o: np.ndarray,
+    mem_o: np.ndarray,
+    pos_o: np.ndarray,
+    vel_o: np.ndarray,
+) -> None:
+    """The linear part of a batched step for envs b0 <= b < b1: [x', mem', pos', vel'] = [x, a, mem, ref] Mk,
+    as the distinct columns ``row = z Mc`` and then column j of [x', mem', pos', vel'] = ``row[take[j]]``
+    (pos' and vel' are columns of x' for the integrators, so they are not computed twice).
+
+    Args:
+        x (B, n q) states, a (B, n_l p) clipped actions, mem (B, n_f p) law memory (width 0: none),
+        ref (B, 2 n d + 2) exogenous row, used only when Mc has rows for it (more than n q + n_l p + n_f p).
+        Mc (rows of [x, a, mem(, ref)], distinct output columns); take (n q + n_f p + 2 n d,) int64.
+    Outputs (rows b0..b1-1): x_o (B, n q), mem_o (B, n_f p), pos_o and vel_o (B, n, d) (m, m/s).
+    """
+    nx, na, nm = x.shape[1], a.shape[1], mem.shape[1]
+    n, d = pos_o.shape[1], pos_o.shape[2]
+    ncol = Mc.shape[1]
+    nr = Mc.shape[0] - nx - na - nm
+    row = np.empty(ncol)
+    for b in range(b0, b1):
+        for j in range(ncol):
+            row[j] = 0.0
+        for i in range(nx):
+            v = x[b, i]
+            for j in range(ncol):
+                row[j] += v * Mc[i, j]
+        for i in range(na):
+            v = a[b, i]
+            for j in range(ncol):
+                row[j] += v * Mc[nx + i, j]
+        for i in range(nm):
+            v = mem[b, i]
+            for j in range(ncol):
+                row[j] += v * Mc[nx + na + i, j]
+        for i in range(nr):
+            v = ref[b, i]
+            for j in range(ncol):
+                row[j] += v * Mc[nx + na + nm + i, j]
+        for j in range(nx):
+            x_o[b, j] = row[take[j]]
+        for j in range(nm):
+            mem_o[b, j] = row[take[nx + j]]
+        c0 = nx + nm
+        for i in range(n):
+            for c in range(d):
+                pos_o[b, i, c] = row[take[c0 + i * d + c]]
+                vel_o[b, i, c] = row[take[c0 + n * d + i * d + c]]
+
+
+@njit(cache=True, nogil=True)
+def step_rows(
+    b0: int,
+    b1: int,
+    x: np.ndarray,
+    a: np.ndarray,
+    mem: np.ndarray,
+    ref0: np.ndarray,
+    Mc: np.ndarray,
+    take: np.ndarray,
+    x_o: np.ndarray,
+    mem_o: np.ndarray,
+    pos: np.ndarray,
+    prev: np.ndarray,
+    vel: np.ndarray,
+    ref: np.ndarray,
+    a2: np.ndarray,
+    gprev: np.ndarray,
+    circles: np.ndarray,
+    walls: np.ndarray,
+    rays: np.ndarray,
+    thr: np.ndarray,
+    pairs: np.ndarray,
+    leaders: np.ndarray,
+    perm: np.ndarray,
+    pinv: np.ndarray,
+    hfit: np.ndarray,
+    box: np.ndarray,
+    fast: float,
+    inv_cycles: float,
+    lin_lo: np.ndarray,
+    lin_hi: np.ndarray,
+    err_hi: float,
+    w_tail: np.ndarray,
+    sense_in: np.ndarray,
+    mode: int,
+    obs: np.ndarray,
+    dist: np.ndarray,
+    flags: np.ndarray,
+    rew: np.ndarray,
+) -> None:
+    """A whole batched step for envs b0 <= b < b1: ``linear_rows`` (from the old row ``ref0``) into x_o,
+    mem_o, pos, vel, then ``measure_rows`` on the new positions (new row ``ref``); the arguments as theirs."""
+    linear_rows(b0, b1, x, a, mem, ref0, Mc, take, x_o, mem_o, pos, vel)
+    measure_rows(
+        b0, b1, pos, prev, vel, ref, a2, gprev, circles, walls, rays, thr, pairs, leaders, perm, pinv, hfit, box,
+        fast, inv_cycles, lin_lo, lin_hi, err_hi, w_tail, sense_in, mode, obs, dist, flags, rew,
+    )  # fmt: skip
+
+
+#: Fewest env rows a thread of ``run_rows`` gets: below it, handing work to a thread costs more than it saves.
+MIN_ROWS_PER_THREAD = 128
+_POOL: dict[str, Any] = {"pid": -1, "pool": None, "size": 0}
+_POOL_LOCK = threading.Lock()
+
+
+def default_threads() -> int:
+    """The CPUs this process may run on (at most 8): the default ``num_threads`` of the batched step."""
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        cpus = os.cpu_count() or 1
+    return max(1, min(8, cpus))
+
+
+def _pool(workers: int) -> ThreadPoolExecutor:
+    """This process's worker threads (made again after a fork, where the parent's threads do not exist)."""
+    with _POOL_LOCK:
+        if _POOL["pid"] != os.getpid() or _POOL["size"] < workers:
+            _POOL.update(pid=os.getpid(), size=workers, pool=ThreadPoolExecutor(workers, "formation-env-step"))
+        return _POOL["pool"]
+
+
+def run_rows(fn: Any, B: int, threads: int, *args: Any) -> None:
+    """``fn(b0, b1, *args)`` over the env rows [0, B) in up to ``threads`` contiguous chunks at once.
+
+    ``fn`` is one of the ``*_rows`` kernels: compiled with the GIL released, and writing only its own rows,
+    so the result is the same for any number of threads. Chunks have at least ``MIN_ROWS_PER_THREAD`` rows;
+    this thread runs the first one.
+    """
+    nt = max(1, min(int(threads), B // MIN_ROWS_PER_THREAD))
+    if nt == 1:
+        fn(0, B, *args)
+        return
+    cuts = [B * t // nt for t in range(nt + 1)]
+    futures = [_pool(nt - 1).submit(fn, cuts[t], cuts[t + 1], *args) for t in range(1, nt)]
+    fn(0, cuts[1], *args)
+    for f in futures:
+        f.result()
 
 
 @njit(cache=True)

@@ -322,6 +322,8 @@ class Engine:
         sensor_range: obstacle sensing range (m).
         max_speed: velocity bound (m/s) of observations and state (values beyond are clipped).
         reward_weights: overrides of the scenario's reward weights (keys ``REWARD_TERMS``).
+        num_threads: threads of a large batched step (at least ``_kernel.MIN_ROWS_PER_THREAD`` envs each;
+            None: the CPUs this process may use, at most 8; 1: none). Results do not depend on it.
         **scenario_kwargs: the scenario's own arguments (unknown ones raise TypeError).
 
     Contacts (collisions): two agents closer than 2 radii (all pairs up to ``ALL_PAIRS_UP_TO`` agents,
@@ -351,6 +353,7 @@ class Engine:
         sensor_range: float = 3.0,
         max_speed: float = 3.0,
         reward_weights: dict[str, float] | None = None,
+        num_threads: int | None = None,
         **scenario_kwargs: Any,
     ) -> None:
         if scenario not in REGISTRY:
@@ -366,6 +369,9 @@ class Engine:
             raise FormationError(f"agent_radius must be finite and >= 0, got {agent_radius}")
         if int(n_rays) != n_rays or n_rays < 1 or int(n_nearest) != n_nearest or n_nearest < 1:
             raise FormationError(f"n_rays and n_nearest must be positive integers, got {n_rays}, {n_nearest}")
+        if num_threads is not None and (int(num_threads) != num_threads or num_threads < 1):
+            raise FormationError(f"num_threads must be a positive integer or None, got {num_threads}")
+        self.num_threads = _kernel.default_threads() if num_threads is None else int(num_threads)
         self.scenario_name = scenario
         fw, om = resolve_framework(framework, omega, CLASSES[scenario].default_framework)
         self.fw, self.omega = fw, om
@@ -1042,7 +1048,8 @@ class Engine:
 
     # ------------------------------------------------------------------ the batched compiled step
     def _build_kernel_batch(self) -> None:
-        """Constants of ``_step_batch`` (``_kernel.batch``): the step's linear part [x', mem', pos', vel'] only."""
+        """Constants of ``_step_batch``: the step's linear part, rows [x, a, mem (, ref)] to columns [x', mem',
+        pos', vel'], as its distinct columns ``_Mc`` and the map ``_take`` back; the sensing mode."""
         self._kbatch = _kernel.AVAILABLE
         if not self._kbatch:
             return
@@ -1051,13 +1058,13 @@ class Engine:
         mk = np.concatenate([self._M[:, cols[k]] for k in names], axis=1)
         zc = self.n * self.q + nl * self.p + self.mem_dim
         self._k_ref = bool(np.any(mk[zc:]))  # the exogenous row ref enters x' (never for the offered laws)
-        self._Mk = np.ascontiguousarray(mk if self._k_ref else mk[:zc])
-        self._kc_cols: dict[str, slice] = {}
-        c = 0
-        for k in names:
-            w = cols[k].stop - cols[k].start
-            self._kc_cols[k] = slice(c, c + w)
-            c += w
+        mk = mk if self._k_ref else mk[:zc]
+        widths = [cols[k].stop - cols[k].start for k in names]  # the column blocks _kernel.linear_rows writes
+        assert widths == [n * self.q, self.mem_dim, n * d, n * d], widths
+        # distinct columns only: pos' and vel' are columns of x' for the integrators
+        uniq, take = np.unique(mk, axis=1, return_inverse=True)
+        self._Mc = np.ascontiguousarray(uniq)
+        self._take = np.ascontiguousarray(take.reshape(-1), dtype=np.int64)
         self._hfit = np.hstack([self.fw.positions, np.ones((n, 1))])
         self._box = np.ascontiguousarray(np.stack(self.bounds).astype(np.float64))
         ks = self.obs_dim - self.L1 - 1
@@ -1082,35 +1089,29 @@ class Engine:
             self._sense_cache[key] = arr
         return arr
 
-    def _measure_compiled(
-        self,
-        pos: Array,
-        vel: Array,
-        ref: Array,
-        params: dict[str, Array],
-        prev: Array | None = None,
-        a2: Array | None = None,
-        gprev: Array | None = None,
-    ) -> tuple[NDArray[np.float32], Array, NDArray[np.bool_], Array]:
-        """``_kernel.batch`` on positions ``pos`` and velocities ``vel`` (B, n, d) with exogenous row ``ref``:
-        (obs (B, n_l, obs_dim), dist (B, n_l + 4), flags (B, 2), rew (B, 2 n_l)), see the kernel. ``prev``
-        (the positions before the step), ``a2`` (squared clipped actions) and ``gprev`` (goal distances before
-        the step) default to nothing moving and no actions, as for ``observe`` and resets."""
+    def _kernel_outputs(self, B: int) -> tuple[NDArray[np.float32], Array, NDArray[np.bool_], Array]:
+        """Fresh (obs (B, n_l, obs_dim) float32, dist (B, n_l + 4), flags (B, 2) bool, rew (B, 2 n_l)) for
+        ``_kernel.measure_rows`` to fill."""
+        nl = self.n_l
+        return (
+            np.empty((B, nl, self.obs_dim), dtype=np.float32),
+            np.empty((B, nl + 4)),
+            np.empty((B, 2), dtype=np.bool_),
+            np.empty((B, 2 * nl)),
+        )
+
+    def _geometry_args(self, pos: Array, params: dict[str, Array]) -> tuple[Any, ...]:
+        """The arguments of ``_kernel.measure_rows`` from ``circles`` to ``mode``: the episodes' obstacles and
+        thresholds, the engine's constants, and the leaders' sensing (computed here from ``pos`` (B, n, d)
+        only when the kernel does not cast the rays itself)."""
         B, nl = pos.shape[0], self.n_l
-        pos = np.ascontiguousarray(pos)
         if self._bmode == _kernel.SENSE_GIVEN:
             laug = np.concatenate([pos[:, self.leaders], np.ones((B, nl, 1))], axis=2)
             sense = np.ascontiguousarray(self._sense(laug, params))
         else:
             sense = self._sense_fill(B)
         walls = params["_W"] if self.n_seg else self._no_walls
-        return _kernel.batch(
-            pos,
-            pos if prev is None else np.ascontiguousarray(prev),
-            np.ascontiguousarray(vel),
-            np.ascontiguousarray(ref),
-            np.zeros((B, nl * self.p)) if a2 is None else a2,
-            np.zeros((B, nl)) if gprev is None else np.ascontiguousarray(gprev),
+        return (
             params["circles"],
             walls,
             params["_R"] if self._bmode == _kernel.SENSE_WALLS else walls,
@@ -1131,6 +1132,29 @@ class Engine:
             self._bmode,
         )
 
+    def _measure_compiled(
+        self, pos: Array, vel: Array, ref: Array, params: dict[str, Array]
+    ) -> tuple[NDArray[np.float32], Array, NDArray[np.bool_], Array]:
+        """``_kernel.measure_rows`` on positions ``pos`` and velocities ``vel`` (B, n, d) with exogenous row
+        ``ref``, nothing moving and no actions (``observe`` and resets): (obs, dist, flags, rew), see the kernel."""
+        B = pos.shape[0]
+        pos = np.ascontiguousarray(pos)
+        out = self._kernel_outputs(B)
+        _kernel.run_rows(
+            _kernel.measure_rows,
+            B,
+            self.num_threads,
+            pos,
+            pos,
+            np.ascontiguousarray(vel),
+            np.ascontiguousarray(ref),
+            np.zeros((B, self.n_l * self.p)),
+            np.zeros((B, self.n_l)),
+            *self._geometry_args(pos, params),
+            *out,
+        )
+        return out
+
     def _episode_end(
         self, state: EngineState, ok: NDArray[np.bool_], collision: NDArray[np.bool_], k: NDArray[np.int64]
     ) -> tuple[NDArray[np.int64], NDArray[np.bool_], NDArray[np.bool_], NDArray[np.bool_]]:
@@ -1148,24 +1172,32 @@ class Engine:
     def _step_batch(
         self, state: EngineState, actions: ArrayLike
     ) -> tuple[EngineState, NDArray[np.float32], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
-        """``step`` with the nonlinear part compiled (``_kernel.batch``): a small matmul for [x', mem', pos',
-        vel'], then per env features, contacts, sensing, observations and the reward's linear part from the new
-        positions. Equal to the numpy step up to rounding (tests)."""
+        """``step`` compiled (``_kernel.step_rows``, the envs split over ``num_threads`` threads): per env the
+        folded matmul for [x', mem', pos', vel'], then contacts, sensing, observations and the reward's linear
+        part from the new positions; then the episode ends and the info arrays in numpy. Equal to the numpy step
+        up to rounding (tests), and the same for any number of threads."""
         B, n, d, nl = state.x.shape[0], self.n, self.d, self.n_l
         a = np.minimum(np.maximum(self.check_actions(actions, B), -1.0), 1.0)
         af = a.reshape(B, -1)
-        parts = [state.x.reshape(B, -1), af] + ([] if state.memory is None else [state.memory.reshape(B, -1)])
-        out = np.concatenate(parts + [state.ref] * self._k_ref, axis=1) @ self._Mk
-        kcol, params, sc = self._kc_cols, state.params, self.scenario
+        params, sc = state.params, self.scenario
         k = state.k + 1
         if sc.moving_goal:
             ref = self._ref(params, k)
         else:
             ref = state.ref.copy()
             ref[:, -1] = k
-        pos = np.ascontiguousarray(out[:, kcol["pos"]]).reshape(B, n, d)
-        vel = np.ascontiguousarray(out[:, kcol["vel"]]).reshape(B, n, d)
-        obs, dist, flags, re = self._measure_compiled(pos, vel, ref, params, state.pos, af * af, state.goal_dist)
+        x_o, mem_o = np.empty((B, n * self.q)), np.empty((B, self.mem_dim))
+        pos, vel = np.empty((B, n, d)), np.empty((B, n, d))
+        mem = np.zeros((B, 0)) if state.memory is None else np.ascontiguousarray(state.memory.reshape(B, -1))
+        lin = (np.ascontiguousarray(state.x.reshape(B, -1)), af, mem, np.ascontiguousarray(state.ref), self._Mc, self._take)
+        obs, dist, flags, re = out = self._kernel_outputs(B)
+        meas = (pos, np.ascontiguousarray(state.pos), vel, ref, af * af, np.ascontiguousarray(state.goal_dist))
+        T = self.num_threads
+        if self._bmode == _kernel.SENSE_GIVEN:  # the sensing needs the new positions first
+            _kernel.run_rows(_kernel.linear_rows, B, T, *lin, x_o, mem_o, pos, vel)
+            _kernel.run_rows(_kernel.measure_rows, B, T, *meas, *self._geometry_args(pos, params), *out)
+        else:
+            _kernel.run_rows(_kernel.step_rows, B, T, *lin, x_o, mem_o, *meas, *self._geometry_args(pos, params), *out)
         err, clear = dist[:, nl], dist[:, nl + 2].copy()
         collision = clear < 0.0
         if flags.any():  # left the world box, or an agent was fast: swept checks
@@ -1183,10 +1215,10 @@ class Engine:
         ws, wc, wf = self._w_head
         rew = re[:, :nl] + (success * ws + collision * wc + err * wf)[:, None]
         new = EngineState(
-            out[:, kcol["x"]].reshape(B, n, self.q),
+            x_o.reshape(B, n, self.q),
             pos,
             vel,
-            out[:, kcol["mem"]].reshape(B, self.n_f, self.p) if self.mem_dim else None,
+            mem_o.reshape(B, self.n_f, self.p) if self.mem_dim else None,
             k,
             ref,
             dist[:, :nl],

@@ -8,11 +8,14 @@
   commander env's step against Pendulum-v1's.
 * (b) Batched: ``FormationVecEnv`` at B = 1024 on a 10-agent framework (3 leaders, 7 followers,
   complete graph), observations and rewards computed, auto-reset included (warmed up, so that
-  episodes end and restart every step as in training), against VMAS on CPU at the same B:
+  episodes end and restart every step as in training), with its default ``num_threads`` (the
+  CPUs the process may use) and with one thread, against VMAS on CPU at the same B:
   ``simple_spread`` and ``navigation`` with 10 agents, and ``simple_spread`` with its default 3
   agents (no resets), VMAS timed with torch's default threads, ``torch.set_num_threads(2)`` and 1
-  (a row per distinct count); then all of (b) again in a subprocess with numpy's OpenBLAS on one
-  thread (``OPENBLAS_NUM_THREADS=1``). Env-steps/s = B / step time. Target >= 3x.
+  (a row per distinct count); ours on one thread is compared with VMAS's 3-agent case only. Then
+  all of (b) again in a subprocess with OpenBLAS, OpenMP and MKL on one thread
+  (``OPENBLAS_NUM_THREADS=1`` etc.; torch then defaults to one thread). Env-steps/s = B / step
+  time. Target >= 3x.
 * (c) SB3 PPO end to end (``learn``): the commander env (``FormationCommander-v0``) against
   ``Pendulum-v1`` with the same PPO settings, one env each, alternated. Target >= 0.9x.
 * (d) Large swarms: core step with a sparse stress at n = 10,000 (< 1 ms), constructive design
@@ -229,20 +232,26 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
     labels: dict[str, str] = {}
     rng = np.random.default_rng(0)
     resets: dict[str, list[int]] = {}
+    from formation_env.env._kernel import default_threads
+
+    ours_threads = default_threads()
     for scen in ("hold", "narrow_passage"):
-        v = FormationVecEnv(scen, num_envs=B, mode="shared", seed=0, framework=fw)
-        v.reset()
-        acts = [rng.uniform(-0.3, 0.3, (v.num_envs, v.p)).astype(np.float32) for _ in range(8)]
-        for i in range(100):  # into the steady state: no episode ends in the first ~15 steps, ~15 a step later
-            v.step(acts[i & 7])
-        resets[scen] = c = [0, 0]  # steps, auto-resets
+        for nt in dict.fromkeys((ours_threads, 1)):  # the default threads, and one thread (if they differ)
+            key = scen if nt == ours_threads else f"{scen}_t{nt}"
+            v = FormationVecEnv(scen, num_envs=B, mode="shared", seed=0, framework=fw, num_threads=nt)
+            v.reset()
+            acts = [rng.uniform(-0.3, 0.3, (v.num_envs, v.p)).astype(np.float32) for _ in range(8)]
+            for i in range(100):  # into the steady state: no episode ends in the first ~15 steps, ~15 a step later
+                v.step(acts[i & 7])
+            resets[key] = c = [0, 0]  # steps, auto-resets
 
-        def step(v: FormationVecEnv = v, acts: list[np.ndarray] = acts, c: list[int] = c) -> None:
-            v.step(acts[c[0] & 7])
-            c[0] += 1
-            c[1] += int(np.count_nonzero(v.last_terminated | v.last_truncated))
+            def step(v: FormationVecEnv = v, acts: list[np.ndarray] = acts, c: list[int] = c) -> None:
+                v.step(acts[c[0] & 7])
+                c[0] += 1
+                c[1] += int(np.count_nonzero(v.last_terminated | v.last_truncated))
 
-        fns[scen] = step
+            fns[key] = step
+            labels[key] = f"FormationVecEnv {scen} B={B} n=10 (3 leaders, shared, threads={nt}"
     rows: list[Row] = []
     if _have("vmas"):
         import torch
@@ -279,26 +288,30 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
                 env.step(vacts[c[0] & 7])
             c[0] += 1
 
-        fns["vmas_simple_spread_n3"] = vstep3
-        labels["vmas_simple_spread_n3"] = (
-            f"VMAS simple_spread CPU B={B} n={len(env3.agents)} (its default), torch threads={default_threads}"
-        )
+        for threads in dict.fromkeys((default_threads, 1)):
+
+            def vstep3(env: Any = env3, vacts: list[Any] = vacts3, th: int = threads, c: list[int] = [0]) -> None:  # noqa: B006
+                torch.set_num_threads(th)
+                with torch.no_grad():
+                    env.step(vacts[c[0] & 7])
+                c[0] += 1
+
+            key = "vmas_simple_spread_n3" + ("" if threads == default_threads else f"_t{threads}")
+            fns[key] = vstep3
+            labels[key] = f"VMAS simple_spread CPU B={B} n={len(env3.agents)} (its default), torch threads={threads}"
         torch.set_num_threads(default_threads)
     else:
         rows.append(
             _skip("b", "VMAS simple_spread / navigation", "vmas not installed (pip install formation-env[bench])")
         )
     rates = _rates(fns, dict.fromkeys(fns, float(B)), 3 if quick else 10, 3 if quick else 7)
-    for scen, (n_steps, n_resets) in resets.items():
-        labels[scen] = (
-            f"FormationVecEnv {scen} B={B} n=10 (3 leaders, shared, auto-reset: {n_resets / max(n_steps, 1):.1f}"
-            " envs reset a step)"
-        )
-    out = _compare_rows(
-        "b", {k: v for k, v in rates.items() if k != "narrow_passage"}, "hold", "env-steps/s", 3.0, labels
-    )
-    np_rates = {k: v for k, v in rates.items() if k != "hold"}
-    out += _compare_rows("b", np_rates, "narrow_passage", "env-steps/s", 3.0, labels)
+    for key, (n_steps, n_resets) in resets.items():
+        labels[key] += f", auto-reset: {n_resets / max(n_steps, 1):.1f} envs reset a step)"
+    peers = {k: v for k, v in rates.items() if k.startswith("vmas")}
+    out: list[Row] = []
+    for key in resets:  # ours at its default threads against every VMAS case; on one thread against VMAS n=3
+        mine = peers if key in ("hold", "narrow_passage") else {k: v for k, v in peers.items() if "_n3" in k}
+        out += _compare_rows("b", {key: rates[key], **mine}, key, "env-steps/s", 3.0, labels)
     return out + rows
 
 

@@ -1,6 +1,9 @@
-"""The single-env step ``Engine.step1`` (compiled fast path) against the batched numpy step, its reference."""
+"""The single-env step ``Engine.step1`` (compiled fast path) against the batched numpy step, its reference; and the
+other compiled kernels (batched step, global state, reset) against their numpy code."""
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 import pytest
@@ -8,6 +11,7 @@ import pytest
 from formation_env.core.errors import ControlDimension, FormationError
 from formation_env.env import _kernel
 from formation_env.env.engine import Engine, EngineState, offered_combinations
+from formation_env.env.scenarios import REGISTRY
 
 
 def _batched(state: EngineState) -> EngineState:
@@ -298,3 +302,111 @@ def test_threaded_step_works_in_a_forked_child():
         pytest.fail("the threaded step hung in a forked child")
     assert child.exitcode == 0
     assert queue.get(timeout=5) == expect
+
+
+# ---------------------------------------------------------------------------- the reset's compiled parts
+def _ten_followers():
+    """10 agents, 7 followers close together: many start draws too crowded, many fine."""
+    from formation_env.core.framework import Framework
+
+    ang = np.linspace(0, 2 * np.pi, 8)[:-1] + 0.3
+    r = np.concatenate([[[1.0, 0.0], [-0.5, 0.9], [-0.5, -0.9]], 0.6 * np.stack([np.cos(ang), np.sin(ang)], 1)])
+    return Framework(r, [(i, j) for i in range(10) for j in range(i + 1, 10)], leaders=[0, 1, 2], name="ten")
+
+
+START_CASES = [
+    ("hold", {}),
+    ("hold", {"framework": "bipyramid_3d"}),
+    ("hold", {"framework": "crowded"}),
+    ("maneuver", {}),
+    ("maneuver_3d", {}),
+    ("narrow_passage", {}),
+    ("obstacle_field", {}),
+    ("obstacle_field", {"framework": "bipyramid_3d"}),
+]
+
+
+@pytest.mark.parametrize(("scenario", "kwargs"), START_CASES)
+def test_compiled_start_test_equals_numpy(scenario, kwargs, monkeypatch):
+    """``_kernel.noisy_starts`` against the numpy ``Scenario._noisy``: the same positions and verdicts, exactly
+    (a verdict decides whether a generator draws again)."""
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    from formation_env.env.scenarios._base import affine_batch
+
+    if kwargs.get("framework") == "crowded":
+        kwargs = {**kwargs, "framework": _ten_followers()}
+    sc = Engine(scenario, **kwargs).scenario
+    B = 400
+    pose = sc.build(sc._plan.draw(np.random.default_rng(1), B))[1]
+    base = affine_batch(sc.r, *pose)
+    todo = np.flatnonzero(np.random.default_rng(2).random(B) < 0.7)  # a subset of the episodes
+    noise = sc._noise_plan.draw(np.random.default_rng(3), todo.size)
+    for spread in (0.3, 1.5):  # a ball wide enough that some starts are too crowded
+        got = base.copy()
+        got_ok = sc._noisy(got, base, todo, noise, spread)
+        want = base.copy()
+        with monkeypatch.context() as m:
+            m.setattr(_kernel, "AVAILABLE", False)
+            want_ok = sc._noisy(want, base, todo, noise, spread)
+        np.testing.assert_array_equal(got_ok, want_ok)
+        np.testing.assert_array_equal(got, want)
+    assert 0 < want_ok.sum() < todo.size  # both verdicts exercised
+
+
+def test_compiled_wall_maps_equal_numpy(monkeypatch):
+    """``_kernel.wall_maps`` against the numpy ``Engine._wall_maps`` on random walls, with walls along x and y
+    (rays parallel to them) among them."""
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    eng = Engine("narrow_passage")
+    seg = np.random.default_rng(0).uniform(-5.0, 5.0, (200, 3, 2, 2))
+    seg[0, 0, 1] = seg[0, 0, 0] + [3.0, 0.0]
+    seg[1, 2, 1] = seg[1, 2, 0] + [0.0, -2.0]
+    got = eng._wall_maps(seg)
+    monkeypatch.setattr(_kernel, "AVAILABLE", False)
+    want = eng._wall_maps(seg)
+    for g, w in zip(got, want, strict=True):
+        assert g.shape == w.shape
+        np.testing.assert_allclose(g, w, rtol=1e-14, atol=1e-14)
+
+
+@pytest.mark.parametrize("scenario", sorted(REGISTRY))
+def test_compiled_resets_equal_numpy(scenario, monkeypatch):
+    """``reset`` and ``reset_each`` with the reset's compiled parts (start test, wall and ray maps) against numpy:
+    the same episodes, and every generator left in the same state."""
+
+    def resets(eng: Engine) -> tuple[EngineState, EngineState, list[Any]]:
+        rngs = [np.random.default_rng(s) for s in range(24)]
+        each = eng.reset_each(rngs)
+        return each, eng.reset(np.random.default_rng(5), 7), [g.bit_generator.state for g in rngs]
+
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    eng = Engine(scenario)
+    fast = resets(eng)
+    monkeypatch.setattr(_kernel, "AVAILABLE", False)
+    ref = resets(eng)
+    assert fast[2] == ref[2]
+    for got, want in zip(fast[:2], ref[:2], strict=True):
+        for f in ("x", "pos", "vel", "k", "ref", "goal_dist", "err", "streak"):
+            np.testing.assert_array_equal(getattr(got, f), getattr(want, f), err_msg=f)
+        assert set(got.params) == set(want.params)
+        for key, arr in want.params.items():
+            np.testing.assert_allclose(got.params[key], arr, rtol=1e-14, atol=1e-14, err_msg=key)
+
+
+def test_reset_kernels_keep_one_signature_each():
+    """Every scenario, batched and per-generator resets, B = 1 and B > 1: one compiled version of each reset
+    kernel."""
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    for scenario, kwargs in START_CASES:
+        if kwargs.get("framework") == "crowded":
+            kwargs = {**kwargs, "framework": _ten_followers()}
+        eng = Engine(scenario, **kwargs)
+        for B in (1, 3):
+            eng.reset(np.random.default_rng(0), B)
+            eng.reset_each([np.random.default_rng(s) for s in range(B)])
+    assert len(_kernel.noisy_starts.signatures) == 1
+    assert len(_kernel.wall_maps.signatures) == 1

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from formation_env.core.errors import FormationError
+from formation_env.env import _kernel
 from formation_env.env.commander import FormationCommanderEnv
 from formation_env.env.engine import Engine
 from formation_env.env.formation import FormationEnv
@@ -227,13 +228,18 @@ def test_reset_each_consumes_each_stream_as_a_single_reset(scenario, kwargs):
         assert rngs[b].random() == g.random()  # the same numbers were consumed
 
 
-@pytest.mark.parametrize("ahead", [1, 3, 19, 50])
-def test_redraws_ahead_leave_the_streams_as_one_at_a_time(ahead):
-    eng = _engine("hold", {"framework": "many", "follower_noise": 0.5})
-    eng.scenario.redraw_ahead = ahead
-    rngs = [np.random.default_rng(s) for s in range(16)]
+@pytest.mark.parametrize("compiled", [True, False])
+@pytest.mark.parametrize("radius", [0.1, 0.15])
+def test_redraws_leave_the_streams_as_one_at_a_time(compiled, radius, monkeypatch):
+    """Crowded followers (most draws redrawn; at radius 0.15 most generators use up all their draws), the start
+    test compiled or in numpy: every generator redraws one draw at a time, as reset(rng_b, 1) does."""
+    if compiled and not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    monkeypatch.setattr(_kernel, "AVAILABLE", compiled)
+    eng = _engine("hold", {"framework": "many", "follower_noise": 0.5, "agent_radius": radius})
+    rngs = [np.random.default_rng(s) for s in range(40)]
     got = eng.scenario.reset_each(rngs)
-    for b in range(16):
+    for b in range(40):
         g = np.random.default_rng(b)
         np.testing.assert_allclose(got["start"][b], eng.scenario.reset(g, 1)["start"][0], rtol=0, atol=1e-12)
         assert rngs[b].random() == g.random()

@@ -607,3 +607,108 @@ def global_state(
             j += 1
         out[b, j] = min(max(k[b] * inv_cycles, lo[j]), hi[j])
     return out
+
+
+@njit(cache=True, error_model="numpy")
+def noisy_starts(
+    out: np.ndarray,
+    base: np.ndarray,
+    todo: np.ndarray,
+    dirs: np.ndarray,
+    rad: np.ndarray,
+    followers: np.ndarray,
+    gap: float,
+) -> np.ndarray:
+    """``Scenario._noisy`` per episode: every follower of episode ``todo[i]`` moved from ``base`` along its direction
+    draw (scaled to unit length) by its radius, then the all-pairs test; positions that pass go into ``out``. The
+    same operations in the same order as the numpy code (the verdict decides whether a generator draws again, so
+    it must agree exactly; tests compare the two); a zero division gives inf or NaN, as in numpy.
+
+    Args:
+        out: start positions (B, n, d), m, written in place for the episodes that pass.
+        base: positions on the start pose, shape (B, n, d), m.
+        todo: the episodes to move, shape (m,) int64.
+        dirs: their followers' standard normal direction draws, shape (m, n_f, d).
+        rad: their followers' displacement lengths, shape (m, n_f), m.
+        followers: the followers' agent indices, shape (n_f,).
+        gap: smallest allowed distance between two agents (m).
+    Returns:
+        ok (m,): no two agents of episode ``todo[i]`` closer than ``gap`` (a NaN distance fails).
+    """
+    n, d = base.shape[1], base.shape[2]
+    m, nf = todo.shape[0], followers.shape[0]
+    trial = np.empty((n, d))
+    ok = np.empty(m, dtype=np.bool_)
+    for e in range(m):
+        b = todo[e]
+        trial[:] = base[b]
+        for k in range(nf):
+            acc = 0.0
+            for c in range(d):
+                acc += dirs[e, k, c] * dirs[e, k, c]
+            norm = np.sqrt(acc)
+            i = followers[k]
+            for c in range(d):
+                trial[i, c] += dirs[e, k, c] / norm * rad[e, k]
+        least = np.inf
+        for i in range(n):
+            for j in range(i + 1, n):
+                acc = 0.0
+                for c in range(d):
+                    v = trial[i, c] - trial[j, c]
+                    acc += v * v
+                if acc < least or acc != acc:  # a NaN stays, as in numpy's min
+                    least = acc
+        ok[e] = np.sqrt(least) >= gap
+        if ok[e]:
+            out[b] = trial
+    return ok
+
+
+@njit(cache=True, error_model="numpy")
+def wall_maps(seg: np.ndarray, dirs: np.ndarray, sensor_range: float) -> tuple[np.ndarray, np.ndarray]:
+    """``Engine._wall_maps`` per episode: the 2D wall and ray maps of ``_episode_geometry``, the same operations in
+    the same order as the numpy code (tests compare the two); a zero division (a wall of zero length) gives inf or
+    NaN, as in numpy.
+
+    Args:
+        seg: wall segments (start, end), shape (B, S, 2, 2), m.
+        dirs: unit ray directions, shape (R, 2).
+        sensor_range: ray length (m).
+    Returns:
+        W (B, 3, 3 S): [p, 1] -> [across, along - length, -along] per wall; Rm (B, 3, 2 S R): a leader's [p, 1] ->
+        [T, AH] per wall and ray (T: range along the ray / sensor range; AH: where along the wall it hits, the
+        wall's ends at -1 and 1; a ray parallel to the wall gets T = -1 from the constant alone).
+    """
+    B, S = seg.shape[0], seg.shape[1]
+    R = dirs.shape[0]
+    W = np.zeros((B, 3, 3 * S))
+    Rm = np.empty((B, 3, 2 * S * R))
+    for b in range(B):
+        for s in range(S):
+            a0, a1 = seg[b, s, 0, 0], seg[b, s, 0, 1]
+            e0, e1 = seg[b, s, 1, 0] - a0, seg[b, s, 1, 1] - a1
+            length = np.sqrt(e0 * e0 + e1 * e1)
+            lm = max(length, 1e-300)
+            t0, t1 = e0 / lm, e1 / lm
+            n0, n1 = -t1, t0
+            a_t, a_n = a0 * t0 + a1 * t1, a0 * n0 + a1 * n1
+            W[b, 0, s], W[b, 1, s], W[b, 2, s] = n0, n1, -a_n
+            W[b, 0, S + s], W[b, 1, S + s], W[b, 2, S + s] = t0, t1, -a_t - length
+            W[b, 0, 2 * S + s], W[b, 1, 2 * S + s], W[b, 2, 2 * S + s] = -t0, -t1, a_t
+            half = length / 2
+            for r in range(R):
+                un = dirs[r, 0] * n0 + dirs[r, 1] * n1
+                ut = dirs[r, 0] * t0 + dirs[r, 1] * t1
+                hit = abs(un) > 1e-9
+                inv = 1.0 / un if hit else 0.0
+                k = s * R + r
+                Rm[b, 0, k] = -n0 * (inv / sensor_range)
+                Rm[b, 1, k] = -n1 * (inv / sensor_range)
+                Rm[b, 2, k] = a_n * inv / sensor_range if hit else -1.0
+                h0 = (t0 - n0 * (ut * inv)) / half
+                h1 = (t1 - n1 * (ut * inv)) / half
+                Rm[b, 0, S * R + k] = h0
+                Rm[b, 1, S * R + k] = h1
+                Rm[b, 2, S * R + k] = -(a0 * h0 + a1 * h1) - 1.0
+    return W, Rm

@@ -621,12 +621,12 @@ class Engine:
             ]
         )
 
-    def _episode_geometry(self, params: dict[str, Array], ref: Array) -> None:
-        """Per-episode geometry into ``params``: ``_off`` (B, F) offsets of Q (circle centres, static goals),
-        ``_thr`` (B, Kc + n + 1) thresholds, and for walls ``_W`` (B, d + 1, 3 S): [p, 1] -> [across,
-        along - length, -along] per wall, ``_R`` (B, d + 1, 2 R S): a leader's [p, 1] -> [T, AH] per wall and
-        ray (T = range along the ray / sensor range; the ray hits inside the wall iff T >= 0 and |AH| <= 1)."""
-        n, d = self.n, self.d
+    def _episode_geometry(self, params: dict[str, Array]) -> None:
+        """Per-episode geometry into ``params``: ``_thr`` (B, Kc + n + 1) thresholds (m), and for walls
+        ``_a``, ``_e`` (B, S, d) their starts and vectors (m) and the maps of :meth:`_wall_maps`: ``_W``
+        (B, d + 1, 3 S), ``_R`` (B, d + 1, 2 R S). (The constant parts of Q, circle centres and static goals,
+        are added where Q is made: :meth:`_add_offsets`.)"""
+        n = self.n
         seg, circ = params["segments"], params["circles"]
         B, S, C = seg.shape[0], self.n_seg, self.n_circ
         if seg.shape[1] != S or circ.shape[1] != C:
@@ -634,43 +634,52 @@ class Engine:
                 f"scenario {self.scenario_name!r} must give {S} segments and {C} circles per episode, "
                 f"got {seg.shape[1]} and {circ.shape[1]}"
             )
-        off = np.zeros((B, self._G0.shape[1]))
         thr = np.repeat(self._thr0[None], B, axis=0)
-        r0, g = self._rows, self._g
         if C:
-            off[:, g["circles"]].reshape(B, n, C, d)[:] = -circ[:, None, :, :d]
-            thr[:, r0["circles"] : r0["walls"]] += np.repeat(circ[:, None, :, d], n, axis=1).reshape(B, n * C)
-        if not self.scenario.moving_goal:  # static goals: x_i* - p_i has a constant part per episode
-            off[:, g["delta"]] = ref[:, self._goal_perm]
+            r0 = self._rows
+            thr[:, r0["circles"] : r0["walls"]] += np.repeat(circ[:, None, :, self.d], n, axis=1).reshape(B, n * C)
         if S:
-            a = seg[:, :, 0]
-            e = seg[:, :, 1] - seg[:, :, 0]
-            length = np.linalg.norm(e, axis=-1)  # (B, S)
-            t = e / np.maximum(length, 1e-300)[..., None]
-            nr = np.stack([-t[..., 1], t[..., 0]], axis=-1)
-            a_t, a_n = np.sum(a * t, -1), np.sum(a * nr, -1)
-            W = np.zeros((B, d + 1, 3 * S))
-            W[:, :d, :S], W[:, d, :S] = nr.transpose(0, 2, 1), -a_n
-            W[:, :d, S : 2 * S], W[:, d, S : 2 * S] = t.transpose(0, 2, 1), -a_t - length
-            W[:, :d, 2 * S :], W[:, d, 2 * S :] = -t.transpose(0, 2, 1), a_t
-            un = np.einsum("rc,bsc->brs", self._dirs, nr)  # (B, R, S)
-            ut = np.einsum("rc,bsc->brs", self._dirs, t)
-            ok = np.abs(un) > 1e-9
-            inv = np.where(ok, 1.0 / np.where(ok, un, 1.0), 0.0)
-            coef_t = -nr[:, None] * (inv / self.sensor_range)[..., None]  # (B, R, S, d)
-            const_t = np.where(ok, a_n[:, None] * inv / self.sensor_range, -1.0)
-            half = (length / 2)[:, None, :]
-            coef_h = (t[:, None] - nr[:, None] * (ut * inv)[..., None]) / half[..., None]
-            const_h = -np.sum(a[:, None] * coef_h, -1) - 1.0
-            R = self.n_rays
-            Rm = np.zeros((B, d + 1, 2, S, R))  # feature (part, s, r)
-            Rm[:, :d, 0] = coef_t.transpose(0, 3, 2, 1)
-            Rm[:, d, 0] = const_t.transpose(0, 2, 1)
-            Rm[:, :d, 1] = coef_h.transpose(0, 3, 2, 1)
-            Rm[:, d, 1] = const_h.transpose(0, 2, 1)
-            params["_W"], params["_R"] = W, Rm.reshape(B, d + 1, 2 * S * R)
-            params["_a"], params["_e"] = a, e
-        params["_off"], params["_thr"] = off, thr
+            params["_W"], params["_R"] = self._wall_maps(seg)
+            params["_a"], params["_e"] = seg[:, :, 0], seg[:, :, 1] - seg[:, :, 0]
+        params["_thr"] = thr
+
+    def _wall_maps(self, seg: Array) -> tuple[Array, Array]:
+        """The walls' coefficient maps, from their segments (start, end) (B, S, 2, d) (2D), m:
+
+        * ``W`` (B, d + 1, 3 S): an agent's [p, 1] -> [across, along - length, -along] per wall;
+        * ``R`` (B, d + 1, 2 S R): a leader's [p, 1] -> [T, AH] per wall and ray (T = range along the ray /
+          sensor range; the ray hits inside the wall iff T >= 0 and |AH| <= 1).
+
+        Compiled per episode (``_kernel.wall_maps``, the same operations) when numba is there, else numpy."""
+        if _kernel.AVAILABLE:
+            return _kernel.wall_maps(np.ascontiguousarray(seg), self._dirs, self.sensor_range)
+        B, S, d = seg.shape[0], seg.shape[1], self.d
+        a = seg[:, :, 0]
+        e = seg[:, :, 1] - seg[:, :, 0]
+        length = np.linalg.norm(e, axis=-1)  # (B, S)
+        t = e / np.maximum(length, 1e-300)[..., None]
+        nr = np.stack([-t[..., 1], t[..., 0]], axis=-1)
+        a_t, a_n = np.sum(a * t, -1), np.sum(a * nr, -1)
+        W = np.zeros((B, d + 1, 3 * S))
+        W[:, :d, :S], W[:, d, :S] = nr.transpose(0, 2, 1), -a_n
+        W[:, :d, S : 2 * S], W[:, d, S : 2 * S] = t.transpose(0, 2, 1), -a_t - length
+        W[:, :d, 2 * S :], W[:, d, 2 * S :] = -t.transpose(0, 2, 1), a_t
+        un = np.einsum("rc,bsc->brs", self._dirs, nr)  # (B, R, S)
+        ut = np.einsum("rc,bsc->brs", self._dirs, t)
+        ok = np.abs(un) > 1e-9
+        inv = np.where(ok, 1.0 / np.where(ok, un, 1.0), 0.0)
+        coef_t = -nr[:, None] * (inv / self.sensor_range)[..., None]  # (B, R, S, d)
+        const_t = np.where(ok, a_n[:, None] * inv / self.sensor_range, -1.0)
+        half = (length / 2)[:, None, :]
+        coef_h = (t[:, None] - nr[:, None] * (ut * inv)[..., None]) / half[..., None]
+        const_h = -np.sum(a[:, None] * coef_h, -1) - 1.0
+        R = self.n_rays
+        Rm = np.zeros((B, d + 1, 2, S, R))  # feature (part, s, r)
+        Rm[:, :d, 0] = coef_t.transpose(0, 3, 2, 1)
+        Rm[:, d, 0] = const_t.transpose(0, 2, 1)
+        Rm[:, :d, 1] = coef_h.transpose(0, 3, 2, 1)
+        Rm[:, d, 1] = const_h.transpose(0, 2, 1)
+        return W, Rm.reshape(B, d + 1, 2 * S * R)
 
     def _build_bounds(self) -> None:
         d, nl, n = self.d, self.n_l, self.n
@@ -744,10 +753,10 @@ class Engine:
         start = np.array(params.pop("start"), dtype=np.float64)
         k = np.zeros(B, dtype=np.int64)
         ref = self._ref(params, k)
-        self._episode_geometry(params, ref)
+        self._episode_geometry(params)
         params["_pvec"] = np.asarray(self.scenario.param_vector(params), dtype=np.float64)  # for global_state
         if B == 1 and self._fast1:
-            self._fold_episode(params)
+            self._fold_episode(params, ref)
         for arr in params.values():
             arr.setflags(write=False)
         if self._kbatch:
@@ -775,15 +784,20 @@ class Engine:
     def _ref(self, params: dict[str, Array], k: NDArray[np.int64]) -> Array:
         """ref = [goal x*(k T), its velocity (x*((k+1) T) - x*(k T)) / T, 1, k], shape (B, 2 n d + 2)."""
         sc = self.scenario
-        B = k.shape[0]
+        B, nd = k.shape[0], self.n * self.d
+        ref = np.empty((B, 2 * nd + 2))
         if sc.moving_goal:
             t = k.astype(np.float64) * self.dt
             g0 = affine_batch(sc.r, *sc.reference(params, t))
-            gv = (affine_batch(sc.r, *sc.reference(params, t + self.dt)) - g0) / self.dt
+            g1 = affine_batch(sc.r, *sc.reference(params, t + self.dt))
+            ref[:, nd : 2 * nd] = ((g1 - g0) / self.dt).reshape(B, nd)
         else:
             g0 = affine_batch(sc.r, params["goal_theta"], params["goal_b"])
-            gv = np.zeros_like(g0)
-        return np.concatenate([g0.reshape(B, -1), gv.reshape(B, -1), np.ones((B, 1)), k[:, None]], axis=1)
+            ref[:, nd : 2 * nd] = 0.0
+        ref[:, :nd] = g0.reshape(B, nd)
+        ref[:, 2 * nd] = 1.0
+        ref[:, 2 * nd + 1] = k
+        return ref
 
     # ------------------------------------------------------------------ features
     def _false(self, B: int) -> NDArray[np.bool_]:
@@ -801,12 +815,19 @@ class Engine:
         pos1 = np.concatenate([pos.reshape(B, -1), np.ones((B, 1))], axis=1)
         return pos1, paug, paug[:, self.leaders]
 
+    def _add_offsets(self, q: Array, circles: Array, ref: Array) -> None:
+        """Add the episode's constant parts to features Q (B, F) in place: the circle centres (B, C, d + 1) to
+        the agent-circle rows (p_i - c_j), the goals in ``ref`` (leaders first) to the goal rows (x_i* - p_i)."""
+        if self.n_circ:
+            B, d = q.shape[0], self.d
+            qc = q[:, self._g["circles"]].reshape(B, self.n, self.n_circ, d)  # a view
+            qc -= circles[:, None, :, :d]
+        q[:, self._g["delta"]] += ref[:, self._goal_perm]
+
     def _features(self, pos1: Array, paug: Array, laug: Array, params: dict[str, Array], ref: Array) -> Array:
         """Q features (B, F) from the augmented positions of ``_aug`` (see the template); ``laug`` is unused."""
         q = pos1 @ self._G0
-        q += params["_off"]
-        if self.scenario.moving_goal:
-            q[:, self._g["delta"]] += ref[:, self._goal_perm]
+        self._add_offsets(q, params["circles"], ref)
         S = self.n_seg
         if S:
             B = q.shape[0]
@@ -1277,13 +1298,13 @@ class Engine:
         self._no_rays.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
         self._no_mem = np.zeros(0)
 
-    def _fold_episode(self, params: dict[str, Array]) -> None:
+    def _fold_episode(self, params: dict[str, Array], ref: Array) -> None:
         """``params["_M1"]`` (1, Z, C1): the episode's feature map at B = 1, so that ``step1`` needs one matmul
-        for all its geometry. From z, its columns give Q (circle centres and static goals included, wall
-        excess left 0), then per agent and wall (along - length, -along, 0) as a (3, n S) block whose
-        column max is the excess along the wall."""
+        for all its geometry. From z, its columns give Q (circle centres and the static goals of ``ref``
+        (1, 2 n d + 2) included, wall excess left 0), then per agent and wall (along - length, -along, 0) as a
+        (3, n S) block whose column max is the excess along the wall."""
         q = self._q1.copy()
-        q[self._one_row] += params["_off"][0]
+        self._add_offsets(q[self._one_row][None], params["circles"], ref)  # z's constant 1 row
         blocks = [q]
         S = self.n_seg
         if S:

@@ -38,6 +38,8 @@ from formation_env.core.errors import FormationError
 from formation_env.core.framework import Framework
 from formation_env.core.validation import check_kwargs_consumed
 
+from .. import _kernel
+
 __all__ = [
     "NAMED_FRAMEWORKS",
     "Draw",
@@ -73,7 +75,11 @@ def uniform(rng: np.random.Generator, bounds: tuple[float, float], size: int | t
 def rotation_2d(angle: Array) -> Array:
     """Batched 2D rotations by ``angle`` (rad, counter-clockwise), (B,) -> (B, 2, 2)."""
     c, s = np.cos(angle), np.sin(angle)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+    out = np.empty((*np.shape(angle), 2, 2))
+    out[..., 0, 0] = out[..., 1, 1] = c
+    out[..., 1, 0] = s
+    out[..., 0, 1] = -s
+    return out
 
 
 def rotation_3d(axis: Array, angle: Array) -> Array:
@@ -88,8 +94,13 @@ def rotation_3d(axis: Array, angle: Array) -> Array:
 
 
 def affine_batch(r: Array, theta: Array, b: Array) -> Array:
-    """x_i = Theta r_i + b for every agent (eq. 7): r (n, d), theta (B, d, d), b (B, d) -> (B, n, d)."""
-    return np.einsum("bij,nj->bni", theta, r) + b[:, None, :]
+    """x_i = Theta r_i + b for every agent (eq. 7): r (n, d), theta (B, d, d), b (B, d) -> (B, n, d), C-contiguous.
+
+    Made as (B, d, n), with r transposed to (d, n): einsum's inner loop then runs over the agents, several times
+    faster at small d than over the d terms of each sum."""
+    x = np.einsum("bij,jn->bin", theta, np.ascontiguousarray(np.transpose(r)))
+    x += b[:, :, None]
+    return np.ascontiguousarray(x.transpose(0, 2, 1))
 
 
 def gram_stress(fw: Framework) -> Array:
@@ -173,7 +184,6 @@ class Scenario:
     formation_tol_default: ClassVar[float] = 0.05
     hold_steps_default: ClassVar[int] = 1
     start_tries: ClassVar[int] = 20
-    redraw_ahead: ClassVar[int] = 4
     follower_noise: float = 0.0
 
     def __init__(self, fw: Framework, *, agent_radius: float, horizon: float, **kwargs: Any) -> None:
@@ -227,15 +237,17 @@ class Scenario:
         raw = self._plan.draw(rng, B)
         params, pose = self.build(raw)
         if pose is not None:
-            params["start"] = self._place_start(pose, raw, lambda *a: self._retry(rng, *a))
+            params["start"] = self._place_start(pose, raw, lambda todo: self._noise_plan.draw(rng, todo.size))
         return params
 
     def reset_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
         """One episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` (the same draws; the
         geometry runs once for all episodes, so values agree to rounding).
 
-        Per generator only the draws run, one call per run of same-kind draws (:class:`DrawPlan`).
-        A scenario without :meth:`draws` (one that overrides :meth:`reset` only) resets per generator.
+        Per generator only the draws run, one call per run of same-kind draws (:class:`DrawPlan`), and
+        the followers' redraws one at a time, as ``reset(rngs[b], 1)`` makes them. The generators must be
+        distinct objects. A scenario without :meth:`draws` (one that overrides :meth:`reset` only) resets
+        per generator.
         """
         if type(self).draws is Scenario.draws:
             eps = [self.reset(g, 1) for g in rngs]
@@ -243,7 +255,9 @@ class Scenario:
         raw = self._plan.draw_each(rngs)
         params, pose = self.build(raw)
         if pose is not None:
-            params["start"] = self._place_start(pose, raw, lambda *a: self._retry_each(rngs, *a))
+            params["start"] = self._place_start(
+                pose, raw, lambda todo: self._noise_plan.draw_each([rngs[b] for b in todo.tolist()])
+            )
         return params
 
     def reference(self, params: dict[str, Array], t: Array) -> tuple[Array, Array]:
@@ -277,15 +291,20 @@ class Scenario:
     def follower_draws(self) -> list[Draw]:
         """The followers' start noise, the last draws of an episode: directions ``_dirs`` (n_f, d)
         standard normal, radii ``_u`` (n_f,) uniform in [0, 1]; none without followers or noise."""
-        nf = len(self.fw.followers)
-        if self.follower_noise <= 0 or nf == 0:
+        if self.follower_noise <= 0 or len(self.fw.followers) == 0:
             return []
-        return [Draw("_dirs", (nf, self.d), "normal"), Draw("_u", (nf,))]
+        return list(self._noise_plan.draws)
 
     @functools.cached_property
     def _plan(self) -> DrawPlan:
         """The layout of :meth:`draws` (built once)."""
         return DrawPlan(self.draws())
+
+    @functools.cached_property
+    def _noise_plan(self) -> DrawPlan:
+        """The followers' noise draws (:meth:`follower_draws`, whatever ``follower_noise``), for the redraws."""
+        nf = len(self.fw.followers)
+        return DrawPlan([Draw("_dirs", (nf, self.d), "normal"), Draw("_u", (nf,))])
 
     @functools.cached_property
     def _pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -301,95 +320,77 @@ class Scenario:
             return slice(int(f[0]), int(f[0]) + f.size)
         return f
 
-    def _noisy(self, base: Array, noise: Array, follower_noise: float) -> tuple[Array, NDArray[np.bool_]]:
-        """Followers moved by the raw noise (B, n_f d + n_f) = [directions, radius draws] within a ball of
-        ``follower_noise`` m; returns (positions (B, n, d), no two agents closer than 3 radii (B,))."""
-        B, nf, d = base.shape[0], len(self.fw.followers), self.d
-        dirs = noise[:, : nf * d].reshape(B, nf, d)  # norms as np.linalg.norm computes them, without its overhead
-        dirs = dirs / np.sqrt(np.add.reduce(dirs * dirs, axis=-1, keepdims=True))
-        rad = follower_noise * noise[:, nf * d :].reshape(B, nf, 1) ** (1.0 / d)
-        trial = base.copy()
-        trial[:, self._followers] += dirs * rad
+    @functools.cached_property
+    def _follower_index(self) -> NDArray[np.int64]:
+        """The followers' indices as an int64 array (for :func:`_kernel.noisy_starts`)."""
+        return np.asarray(self.fw.followers, dtype=np.int64)
+
+    def _noisy(
+        self, out: Array, base: Array, todo: NDArray[np.intp], noise: dict[str, Array], follower_noise: float
+    ) -> NDArray[np.bool_]:
+        """Move the followers of episodes ``todo`` (m,) from ``base`` (B, n, d) by their noise draws
+        ``noise["_dirs"]`` (m, n_f, d) and ``noise["_u"]`` (m, n_f) (:meth:`follower_draws`), within a ball of
+        ``follower_noise`` m: each along its direction, by ``follower_noise`` u^(1/d). The episodes whose agents
+        are then no two closer than 3 radii get these positions in ``out`` (B, n, d); returns that test (m,).
+
+        Compiled per episode (``_kernel.noisy_starts``, the same operations) up to ``ALL_PAIRS_GAP_UP_TO``
+        agents when numba is there; numpy otherwise, and a k-d tree for larger swarms."""
+        dirs = noise["_dirs"]
+        rad = follower_noise * noise["_u"] ** (1.0 / self.d)
         gap3 = 3.0 * self.agent_radius
+        if _kernel.AVAILABLE and self.fw.n <= ALL_PAIRS_GAP_UP_TO:
+            return _kernel.noisy_starts(
+                out, base, todo, np.ascontiguousarray(dirs), np.ascontiguousarray(rad), self._follower_index, gap3
+            )
+        # norms as np.linalg.norm computes them, without its overhead
+        dirs = dirs / np.sqrt(np.add.reduce(dirs * dirs, axis=-1, keepdims=True))
+        trial = base[todo]
+        trial[:, self._followers] += dirs * rad[:, :, None]
         if self.fw.n > ALL_PAIRS_GAP_UP_TO:  # large swarms: a k-d tree finds the close pairs in O(n log n)
             from scipy.spatial import cKDTree
 
-            return trial, np.array([not cKDTree(t).query_pairs(gap3, output_type="ndarray").size for t in trial])
-        iu, ju = self._pairs
-        diff = trial[:, iu] - trial[:, ju]
-        gap = np.sqrt(np.add.reduce(diff * diff, axis=-1).min(axis=1))
-        return trial, gap >= gap3
+            ok = np.array([not cKDTree(t).query_pairs(gap3, output_type="ndarray").size for t in trial], dtype=bool)
+        else:
+            iu, ju = self._pairs
+            diff = trial[:, iu] - trial[:, ju]
+            ok = np.sqrt(np.add.reduce(diff * diff, axis=-1).min(axis=1)) >= gap3
+        out[todo[ok]] = trial[ok]
+        return ok
 
-    def _redraw(self, rng: np.random.Generator, m: int) -> Array:
-        """The followers' noise of m episodes from one generator (normal (m, n_f, d), then uniform (m, n_f, 1)),
-        as (m, n_f d + n_f)."""
-        nf, d = len(self.fw.followers), self.d
-        dirs = rng.normal(size=(m, nf, d))
-        u = rng.uniform(size=(m, nf, 1))
-        return np.concatenate([dirs.reshape(m, -1), u.reshape(m, -1)], axis=1)
-
-    def _retry(self, rng: np.random.Generator, base: Array, out: Array, todo: NDArray[np.intp]) -> None:
-        """Redraw the followers' noise of episodes ``todo`` from one generator, all of them per round (as
-        :meth:`start_positions`), writing the first good draw of each into ``out``; ``start_tries`` in all."""
-        for _ in range(self.start_tries - 1):
+    def _settle(
+        self,
+        base: Array,
+        noise: dict[str, Array],
+        redraw: Callable[[NDArray[np.intp]], dict[str, Array]],
+        follower_noise: float,
+        tries: int,
+    ) -> Array:
+        """Start positions (B, n, d): ``base`` with the followers moved by the noise draws ``noise`` of all B
+        episodes (:meth:`_noisy`). Episodes whose agents would start closer than 3 radii draw again, one draw per
+        episode a round (``redraw(episodes)``: the noise draws of those episodes), ``tries`` draws in all; those
+        still too close keep zero noise."""
+        out = base.copy()
+        todo = np.arange(base.shape[0])
+        todo = todo[~self._noisy(out, base, todo, noise, follower_noise)]
+        for _ in range(tries - 1):
             if todo.size == 0:
                 break
-            trial, ok = self._noisy(base[todo], self._redraw(rng, todo.size), self.follower_noise)
-            out[todo[ok]] = trial[ok]
-            todo = todo[~ok]
-
-    def _retry_each(self, rngs: Sequence[np.random.Generator], base: Array, out: Array, todo: NDArray[np.intp]) -> None:
-        """As :meth:`_retry`, but episode b redraws from ``rngs[b]`` alone, one draw at a time as
-        ``reset(rngs[b], 1)`` does. Drawn ahead for speed: ``redraw_ahead`` draws per generator are judged
-        in one batch, then the generator is put back to its state just after its first good draw (its state
-        is saved after each draw), so it ends where drawing one at a time would leave it."""
-        nf, d = len(self.fw.followers), self.d
-        nfd, w = nf * d, nf * d + nf
-        left = self.start_tries - 1
-        while todo.size and left > 0:
-            r = min(self.redraw_ahead, left)
-            m = todo.size
-            cand = np.empty((m, r, w))
-            saved: list[list[dict[str, Any]]] = []
-            for g, rows in zip([rngs[b] for b in todo.tolist()], cand, strict=True):
-                bg, after = g.bit_generator, []
-                for j, row in enumerate(rows):
-                    g.standard_normal(out=row[:nfd])
-                    g.random(out=row[nfd:])
-                    if j < r - 1:
-                        after.append(bg.state)
-                saved.append(after)
-            trial, ok = self._noisy(np.repeat(base[todo], r, axis=0), cand.reshape(m * r, w), self.follower_noise)
-            ok = ok.reshape(m, r)
-            hit = ok.any(axis=1)
-            first = ok.argmax(axis=1)
-            for i in np.flatnonzero(hit & (first < r - 1)).tolist():
-                rngs[todo[i]].bit_generator.state = saved[i][first[i]]
-            good = np.flatnonzero(hit)
-            out[todo[good]] = trial.reshape(m, r, *base.shape[1:])[good, first[good]]
-            todo = todo[~hit]
-            left -= r
+            todo = todo[~self._noisy(out, base, todo, redraw(todo), follower_noise)]
+        return out
 
     def _place_start(
         self,
         pose: tuple[Array, Array],
         raw: dict[str, Array],
-        retry: Callable[[Array, Array, NDArray[np.intp]], None],
+        redraw: Callable[[NDArray[np.intp]], dict[str, Array]],
     ) -> Array:
         """Start positions (B, n, d) on ``pose`` = (Theta0, b0), followers moved by the noise of the draws
-        ``_dirs``, ``_u`` (:meth:`follower_draws`; none: no noise). Episodes whose agents start closer than
-        3 radii get ``retry(base, out, episodes)`` (more draws, ``start_tries`` in all, then zero noise)."""
+        ``_dirs``, ``_u`` (:meth:`follower_draws`; none: no noise) and, where agents start closer than 3 radii,
+        of ``redraw`` (:meth:`_settle`, ``start_tries`` draws in all)."""
         base = affine_batch(self.r, *pose)
         if "_u" not in raw:
             return base
-        B = base.shape[0]
-        out = base.copy()
-        noise = np.concatenate([raw["_dirs"].reshape(B, -1), raw["_u"].reshape(B, -1)], axis=1)
-        trial, ok = self._noisy(base, noise, self.follower_noise)
-        out[ok] = trial[ok]
-        if not ok.all():
-            retry(base, out, np.flatnonzero(~ok))
-        return out
+        return self._settle(base, raw, redraw, self.follower_noise, self.start_tries)
 
     def start_positions(
         self, rng: np.random.Generator, theta: Array, b: Array, follower_noise: float, tries: int = 20
@@ -401,17 +402,12 @@ class Scenario:
         Returns shape (B, n, d).
         """
         base = affine_batch(self.r, theta, b)
-        out = base.copy()
-        if follower_noise <= 0 or len(self.fw.followers) == 0:
-            return out
-        todo = np.arange(base.shape[0])
-        for _ in range(tries):
-            trial, ok = self._noisy(base[todo], self._redraw(rng, todo.size), follower_noise)
-            out[todo[ok]] = trial[ok]
-            todo = todo[~ok]
-            if todo.size == 0:
-                break
-        return out
+        if follower_noise <= 0 or len(self.fw.followers) == 0 or tries < 1:
+            return base
+        plan = self._noise_plan
+        return self._settle(
+            base, plan.draw(rng, base.shape[0]), lambda todo: plan.draw(rng, todo.size), follower_noise, tries
+        )
 
 
 class Draw(NamedTuple):
@@ -463,13 +459,16 @@ class DrawPlan:
             k += size
         self.K = k
         self.calls = [(str(c[0]), int(c[1]), int(c[2])) for c in calls]
-        self._lo = np.array(lo)
-        self._span = np.array(span)
+        lo_a, span_a = np.array(lo), np.array(span)
         kinds = np.array(
             [dr.kind for dr in self.draws for _ in range(self.cols[dr.name].start, self.cols[dr.name].stop)]
         )
-        self._unif = np.flatnonzero(kinds == "uniform")
+        # draw_each maps u to lo + (hi - lo) u on the runs of uniform columns other than [0, 1]
+        scaled = np.concatenate([[0], (kinds == "uniform") & ((lo_a != 0.0) | (span_a != 1.0)), [0]])
+        edges = np.flatnonzero(np.diff(scaled.astype(np.int8)))
+        self._scaled = [(slice(a, b), lo_a[a:b], span_a[a:b]) for a, b in zip(edges[::2], edges[1::2], strict=True)]
         self._sign = np.flatnonzero(kinds == "sign")
+        self._shapes = [(dr.name, self.cols[dr.name], dr.shape) for dr in self.draws]
 
     def draw(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
         """One generator call per draw, each for all B episodes (the scenarios' ``reset(rng, B)`` stream)."""
@@ -486,25 +485,23 @@ class DrawPlan:
 
     def draw_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
         """One episode per generator: entry b equals ``draw(rngs[b], 1)``; the Python work per generator
-        is one call per run of same-kind draws."""
+        is one call per run of same-kind draws. Each run is drawn from every generator in turn (distinct
+        generators: each still makes its calls in the plan's order)."""
         B = len(rngs)
         raw = np.zeros((B, self.K))
-        calls = self.calls
-        if len(calls) == 1 and calls[0][0] == "uniform":  # the common case: a single call per generator
-            _, a, b = calls[0]
-            for g, row in zip(rngs, raw[:, a:b], strict=True):
-                g.random(out=row)
-        else:
-            for g, row in zip(rngs, raw, strict=True):
-                for kind, a, b in calls:
-                    if kind == "uniform":
-                        g.random(out=row[a:b])
-                    elif kind == "normal":
-                        g.standard_normal(out=row[a:b])
-                    else:
-                        row[a:b] = g.integers(0, 2, size=b - a)
+        for kind, a, b in self.calls:
+            rows = raw[:, a:b]
+            if kind == "uniform":
+                for g, row in zip(rngs, rows, strict=True):
+                    g.random(out=row)
+            elif kind == "normal":
+                for g, row in zip(rngs, rows, strict=True):
+                    g.standard_normal(out=row)
+            else:
+                for g, row in zip(rngs, rows, strict=True):
+                    row[:] = g.integers(0, 2, size=b - a)
         if self._sign.size:
             raw[:, self._sign] = 2.0 * raw[:, self._sign] - 1.0  # choice([-1, 1]) picks index integers(0, 2)
-        u = self._unif
-        raw[:, u] = self._lo[u] + self._span[u] * raw[:, u]
-        return {dr.name: raw[:, self.cols[dr.name]].reshape(B, *dr.shape) for dr in self.draws}
+        for cols, lo, span in self._scaled:
+            raw[:, cols] = lo + span * raw[:, cols]
+        return {name: raw[:, cols].reshape(B, *shape) for name, cols, shape in self._shapes}

@@ -221,6 +221,21 @@ def bench_single(quick: bool) -> list[Row]:
 
 
 # ---------------------------------------------------------------------------- (b) batched
+def _vmas_step(env: Any, vacts: list[Any], threads: int) -> Callable[[], None]:
+    """One VMAS step on ``threads`` torch threads, cycling through the 8 prepared action sets ``vacts``."""
+    import torch
+
+    count = [0]
+
+    def step() -> None:
+        torch.set_num_threads(threads)
+        with torch.no_grad():
+            env.step(vacts[count[0] & 7])
+        count[0] += 1
+
+    return step
+
+
 def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
     """B-env steps/s of ``FormationVecEnv`` (10 agents, random actions in [-0.3, 0.3], timed in the steady
     state of auto-resets) against VMAS on CPU at the same B: simple_spread and navigation with 10 agents,
@@ -263,17 +278,10 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
             env.reset()
             vacts = [[env.get_random_action(a) for a in env.agents] for _ in range(8)]
             for threads in (default_threads, 2, 1):
-
-                def vstep(env: Any = env, vacts: list[Any] = vacts, th: int = threads, c: list[int] = [0]) -> None:  # noqa: B006
-                    torch.set_num_threads(th)
-                    with torch.no_grad():
-                        env.step(vacts[c[0] & 7])
-                    c[0] += 1
-
                 key = f"vmas_{scen}_{threads}"
                 if key in fns:
                     continue
-                fns[key] = vstep
+                fns[key] = _vmas_step(env, vacts, threads)
                 labels[key] = f"VMAS {scen} CPU B={B} n=10, torch threads={threads}" + (
                     " (default)" if threads == default_threads else ""
                 )
@@ -281,23 +289,9 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
         env3 = vmas.make_env("simple_spread", num_envs=B, device="cpu", continuous_actions=True, seed=0)
         env3.reset()
         vacts3 = [[env3.get_random_action(a) for a in env3.agents] for _ in range(8)]
-
-        def vstep3(env: Any = env3, vacts: list[Any] = vacts3, c: list[int] = [0]) -> None:  # noqa: B006
-            torch.set_num_threads(default_threads)
-            with torch.no_grad():
-                env.step(vacts[c[0] & 7])
-            c[0] += 1
-
         for threads in dict.fromkeys((default_threads, 1)):
-
-            def vstep3(env: Any = env3, vacts: list[Any] = vacts3, th: int = threads, c: list[int] = [0]) -> None:  # noqa: B006
-                torch.set_num_threads(th)
-                with torch.no_grad():
-                    env.step(vacts[c[0] & 7])
-                c[0] += 1
-
             key = "vmas_simple_spread_n3" + ("" if threads == default_threads else f"_t{threads}")
-            fns[key] = vstep3
+            fns[key] = _vmas_step(env3, vacts3, threads)
             labels[key] = f"VMAS simple_spread CPU B={B} n={len(env3.agents)} (its default), torch threads={threads}"
         torch.set_num_threads(default_threads)
     else:

@@ -35,6 +35,14 @@ except ImportError:  # pragma: no cover
 from formation_env.core import Framework
 
 
+def crowded_followers() -> Framework:
+    """10 agents in 2D (3 leaders, 7 followers close together, complete graph): with follower noise, many
+    start draws are too crowded and drawn again, many are fine."""
+    ang = np.linspace(0, 2 * np.pi, 8)[:-1] + 0.3
+    r = np.concatenate([[[1.0, 0.0], [-0.5, 0.9], [-0.5, -0.9]], 0.6 * np.stack([np.cos(ang), np.sin(ang)], 1)])
+    return Framework(r, [(i, j) for i in range(10) for j in range(i + 1, 10)], leaders=[0, 1, 2], name="ten")
+
+
 def clique_vector(points: np.ndarray, clique: Sequence[int], n: int) -> np.ndarray:
     """The unit a in R^n supported on ``clique`` (d + 2 agents) with sum a_i = 0, sum a_i p_i = 0."""
     d = points.shape[1]

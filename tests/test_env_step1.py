@@ -3,10 +3,12 @@ other compiled kernels (batched step, global state, reset) against their numpy c
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import numpy as np
 import pytest
+from conftest import crowded_followers
 
 from formation_env.core.errors import ControlDimension, FormationError
 from formation_env.env import _kernel
@@ -202,7 +204,7 @@ def test_rows_kernels_split_into_contiguous_chunks(monkeypatch):
         spans = sorted(seen)
         assert len(spans) == chunks
         assert spans[0][0] == 0 and spans[-1][1] == B
-        assert all(a[1] == b[0] for a, b in zip(spans, spans[1:]))
+        assert all(a[1] == b[0] for a, b in itertools.pairwise(spans))
         assert min(b1 - b0 for b0, b1 in spans) >= min(m, B)
 
 
@@ -305,13 +307,11 @@ def test_threaded_step_works_in_a_forked_child():
 
 
 # ---------------------------------------------------------------------------- the reset's compiled parts
-def _ten_followers():
-    """10 agents, 7 followers close together: many start draws too crowded, many fine."""
-    from formation_env.core.framework import Framework
-
-    ang = np.linspace(0, 2 * np.pi, 8)[:-1] + 0.3
-    r = np.concatenate([[[1.0, 0.0], [-0.5, 0.9], [-0.5, -0.9]], 0.6 * np.stack([np.cos(ang), np.sin(ang)], 1)])
-    return Framework(r, [(i, j) for i in range(10) for j in range(i + 1, 10)], leaders=[0, 1, 2], name="ten")
+def _start_engine(scenario: str, kwargs: dict) -> Engine:
+    """The engine of a ``START_CASES`` entry (framework "crowded": ``crowded_followers``)."""
+    if kwargs.get("framework") == "crowded":
+        kwargs = {**kwargs, "framework": crowded_followers()}
+    return Engine(scenario, **kwargs)
 
 
 START_CASES = [
@@ -334,9 +334,7 @@ def test_compiled_start_test_equals_numpy(scenario, kwargs, monkeypatch):
         pytest.skip("numba is not installed")
     from formation_env.env.scenarios._base import affine_batch
 
-    if kwargs.get("framework") == "crowded":
-        kwargs = {**kwargs, "framework": _ten_followers()}
-    sc = Engine(scenario, **kwargs).scenario
+    sc = _start_engine(scenario, kwargs).scenario
     B = 400
     pose = sc.build(sc._plan.draw(np.random.default_rng(1), B))[1]
     base = affine_batch(sc.r, *pose)
@@ -402,9 +400,7 @@ def test_reset_kernels_keep_one_signature_each():
     if not _kernel.AVAILABLE:
         pytest.skip("numba is not installed")
     for scenario, kwargs in START_CASES:
-        if kwargs.get("framework") == "crowded":
-            kwargs = {**kwargs, "framework": _ten_followers()}
-        eng = Engine(scenario, **kwargs)
+        eng = _start_engine(scenario, kwargs)
         for B in (1, 3):
             eng.reset(np.random.default_rng(0), B)
             eng.reset_each([np.random.default_rng(s) for s in range(B)])

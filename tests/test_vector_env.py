@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import crowded_followers
 
 from formation_env.core.errors import FormationError
 from formation_env.env import _kernel
@@ -182,15 +183,6 @@ def test_sb3_ppo_runs(mode):
 
 
 # ---------------------------------------------------------------------------- fast auto-reset path
-def _many_followers():
-    """10 agents (3 leaders, 7 followers close together): most follower-noise draws are redrawn."""
-    from formation_env.core.framework import Framework
-
-    ang = np.linspace(0, 2 * np.pi, 8)[:-1] + 0.3
-    r = np.concatenate([[[1.0, 0.0], [-0.5, 0.9], [-0.5, -0.9]], 0.6 * np.stack([np.cos(ang), np.sin(ang)], 1)])
-    return Framework(r, [(i, j) for i in range(10) for j in range(i + 1, 10)], leaders=[0, 1, 2], name="ten")
-
-
 RESET_CASES = [
     ("hold", {}),
     ("hold", {"framework": "bipyramid_3d"}),
@@ -208,7 +200,7 @@ RESET_CASES = [
 def _engine(scenario: str, kwargs: dict) -> Engine:
     kw = dict(kwargs)
     if kw.get("framework") == "many":
-        kw["framework"] = _many_followers()
+        kw["framework"] = crowded_followers()
     return Engine(scenario, **kw)
 
 

@@ -10,9 +10,8 @@ the two on every scenario. Without numba (``AVAILABLE`` False) ``step1`` takes t
 The batched step (``Engine.step`` at B > 1) is ``step_rows`` = ``linear_rows`` (the folded matmul per
 env) then ``measure_rows`` (contacts, rays, observations, rewards), over a range of env rows with
 the GIL released, so that ``run_rows`` can split a large batch over threads; the rows are
-independent, so the result does not depend on the number of threads. The matmul is not numpy's:
-OpenBLAS splits a (1024, 46) x (46, 80) product over its threads, and when another process holds
-a core, that small product waits for a whole time slice.
+independent, so the result does not depend on the number of threads. The matmul is compiled too, so
+that it runs on the same threads as the rest instead of beside OpenBLAS's own thread pool.
 
 Compiled on first use and cached on disk (``cache=True``), so later processes start at once.
 """
@@ -485,42 +484,13 @@ def step_rows(
     take: np.ndarray,
     x_o: np.ndarray,
     mem_o: np.ndarray,
-    pos: np.ndarray,
-    prev: np.ndarray,
-    vel: np.ndarray,
-    ref: np.ndarray,
-    a2: np.ndarray,
-    gprev: np.ndarray,
-    circles: np.ndarray,
-    walls: np.ndarray,
-    rays: np.ndarray,
-    thr: np.ndarray,
-    pairs: np.ndarray,
-    leaders: np.ndarray,
-    perm: np.ndarray,
-    pinv: np.ndarray,
-    hfit: np.ndarray,
-    box: np.ndarray,
-    fast: float,
-    inv_cycles: float,
-    lin_lo: np.ndarray,
-    lin_hi: np.ndarray,
-    err_hi: float,
-    w_tail: np.ndarray,
-    sense_in: np.ndarray,
-    mode: int,
-    obs: np.ndarray,
-    dist: np.ndarray,
-    flags: np.ndarray,
-    rew: np.ndarray,
+    *measure: Any,
 ) -> None:
-    """A whole batched step for envs b0 <= b < b1: ``linear_rows`` (from the old row ``ref0``) into x_o,
-    mem_o, pos, vel, then ``measure_rows`` on the new positions (new row ``ref``); the arguments as theirs."""
-    linear_rows(b0, b1, x, a, mem, ref0, Mc, take, x_o, mem_o, pos, vel)
-    measure_rows(
-        b0, b1, pos, prev, vel, ref, a2, gprev, circles, walls, rays, thr, pairs, leaders, perm, pinv, hfit, box,
-        fast, inv_cycles, lin_lo, lin_hi, err_hi, w_tail, sense_in, mode, obs, dist, flags, rew,
-    )  # fmt: skip
+    """A whole batched step for envs b0 <= b < b1: ``linear_rows`` (from the old row ``ref0``) into x_o, mem_o
+    and ``measure``'s pos and vel, then ``measure_rows(b0, b1, *measure)`` on the new positions (``measure``:
+    ``measure_rows``'s arguments from ``pos`` on, with the new row ``ref``)."""
+    linear_rows(b0, b1, x, a, mem, ref0, Mc, take, x_o, mem_o, measure[0], measure[2])
+    measure_rows(b0, b1, *measure)
 
 
 #: Fewest env rows a thread of ``run_rows`` gets: below it, handing work to a thread costs more than it saves.

@@ -1030,16 +1030,7 @@ class Engine:
             streak,
             params,
         )
-        info = {
-            "success": success,
-            "collision": collision,
-            "out_of_bounds": oob,
-            "formation_error": err,
-            "min_clearance": clear,
-            "goal_distance": nv[:, kc:-1].max(axis=1),
-            "control_effort": re[:, nl:],
-            "time": k * self.dt,
-        }
+        info = self._info(success, collision, oob, err, clear, nv[:, kc:-1].max(axis=1), re[:, nl:], k)
         return new, obs, re[:, :nl], terminated, truncated, info
 
     def _guarded(
@@ -1210,7 +1201,8 @@ class Engine:
         x_o, mem_o = np.empty((B, n * self.q)), np.empty((B, self.mem_dim))
         pos, vel = np.empty((B, n, d)), np.empty((B, n, d))
         mem = np.zeros((B, 0)) if state.memory is None else np.ascontiguousarray(state.memory.reshape(B, -1))
-        lin = (np.ascontiguousarray(state.x.reshape(B, -1)), af, mem, np.ascontiguousarray(state.ref), self._Mc, self._take)
+        x, ref0 = np.ascontiguousarray(state.x.reshape(B, -1)), np.ascontiguousarray(state.ref)
+        lin = (x, af, mem, ref0, self._Mc, self._take)
         obs, dist, flags, re = out = self._kernel_outputs(B)
         meas = (pos, np.ascontiguousarray(state.pos), vel, ref, af * af, np.ascontiguousarray(state.goal_dist))
         T = self.num_threads
@@ -1247,16 +1239,7 @@ class Engine:
             streak,
             params,
         )
-        info: dict[str, Any] = {
-            "success": success,
-            "collision": collision,
-            "out_of_bounds": oob,
-            "formation_error": err,
-            "min_clearance": clear,
-            "goal_distance": dist[:, nl + 1],
-            "control_effort": re[:, nl:],
-            "time": k * self.dt,
-        }
+        info = self._info(success, collision, oob, err, clear, dist[:, nl + 1], re[:, nl:], k)
         return new, obs, rew, terminated, truncated, info
 
     # ------------------------------------------------------------------ the B = 1 step
@@ -1402,20 +1385,26 @@ class Engine:
             np.array([streak_i]),
             params,
         )
-        info = {
-            "success": success_f,
-            "collision": collision_f,
-            "out_of_bounds": oob_f,
-            "formation_error": err,
-            "min_clearance": clear_f,
-            "goal_distance": max(nvl[kc:-1]),
-            "control_effort": rel[nl:],
-            "time": k_i * self.dt,
-        }
+        info = self._info(success_f, collision_f, oob_f, err, clear_f, max(nvl[kc:-1]), rel[nl:], k_i)
         trunc_f = k_i >= self._max_cycles and not term_f
         return new, obs if observe else None, [r + head for r in rel[:nl]], term_f, trunc_f, info
 
     # ------------------------------------------------------------------ helpers
+    def _info(
+        self, success: Any, collision: Any, oob: Any, err: Any, clear: Any, goal_distance: Any, effort: Any, k: Any
+    ) -> dict[str, Any]:
+        """A step's info (the keys of ``step``'s docstring), arrays over envs or scalars of one env; k: samples."""
+        return {
+            "success": success,
+            "collision": collision,
+            "out_of_bounds": oob,
+            "formation_error": err,
+            "min_clearance": clear,
+            "goal_distance": goal_distance,
+            "control_effort": effort,
+            "time": k * self.dt,
+        }
+
     def affine_targets(self, state: EngineState) -> Array:
         """Where the law drives every agent: leaders where they are, followers at L x_l (Lemma 2), (B, n, d)."""
         out = state.pos.copy()

@@ -350,14 +350,5 @@ class SwarmStep:
         obs = eng._assemble(self._lin(pos, vel, ref), err, self._sense(pos, params))
         nl = eng.n_l
         new = EngineState(x, pos, vel, memory, k, ref, gd_l, err, streak, params)
-        info: dict[str, Any] = {
-            "success": success,
-            "collision": collision,
-            "out_of_bounds": oob,
-            "formation_error": err,
-            "min_clearance": clear,
-            "goal_distance": goal_distance,
-            "control_effort": re[:, nl:],
-            "time": k * eng.dt,
-        }
+        info = eng._info(success, collision, oob, err, clear, goal_distance, re[:, nl:], k)
         return new, obs, re[:, :nl], terminated, truncated, info

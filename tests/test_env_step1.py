@@ -194,6 +194,37 @@ def test_batched_step_is_the_same_on_any_number_of_threads(scenario):
             np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("law", ["dynamic", "dynamic_distributed"])
+def test_linear_rows_has_the_bits_of_the_dense_product(law):
+    """``linear_rows`` (Mc's nonzeros over blocks of envs) gives the same bits as the dense product z Mc summed
+    row by row in z's order, then gathered by ``_take``; on rows [3, 197) of 200 (blocks cut mid-way), with
+    and without the law's memory."""
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    eng = Engine("narrow_passage", "double_integrator", law)
+    B, rng = 200, np.random.default_rng(4)
+    x = rng.normal(size=(B, eng.n * eng.q))
+    a = rng.uniform(-1, 1, (B, eng.n_l * eng.p))
+    mem = rng.normal(size=(B, eng.mem_dim))
+    ref = rng.normal(size=(B, 2 * eng.n * eng.d + 2))
+    outs = [
+        np.zeros((B, eng.n * eng.q)),
+        np.zeros((B, eng.mem_dim)),
+        np.zeros((B, eng.n, eng.d)),
+        np.zeros((B, eng.n, eng.d)),
+    ]
+    _kernel.linear_rows(3, 197, x, a, mem, ref, *eng._Mc_csc, eng._take, *outs)
+    z = np.hstack([x, a, mem, ref])[:, : eng._Mc.shape[0]]
+    y = np.zeros((B, eng._Mc.shape[1]))
+    for i in range(z.shape[1]):  # each column summed from zero in z's order, as a dense loop does
+        y = y + z[:, i : i + 1] * eng._Mc[i]
+    want = y[:, eng._take]
+    got = np.hstack([o.reshape(B, -1) for o in outs])
+    assert np.array_equal(got[3:197], want[3:197])
+    assert not got[:3].any() and not got[197:].any()
+    assert np.count_nonzero(eng._Mc) == eng._Mc_csc[2].size < eng._Mc.size / 2  # most of Mc is zero: skipped
+
+
 def test_rows_kernels_split_into_contiguous_chunks(monkeypatch):
     """``run_rows`` covers [0, B) once, in at most ``threads`` chunks of at least MIN_ROWS_PER_THREAD rows."""
     seen: list[tuple[int, int]] = []

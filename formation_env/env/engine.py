@@ -1061,7 +1061,8 @@ class Engine:
     # ------------------------------------------------------------------ the batched compiled step
     def _build_kernel_batch(self) -> None:
         """Constants of ``_step_batch``: the step's linear part, rows [x, a, mem (, ref)] to columns [x', mem',
-        pos', vel'], as its distinct columns ``_Mc`` and the map ``_take`` back; the sensing mode."""
+        pos', vel'], as its distinct columns ``_Mc`` (``_Mc_csc``: their nonzeros) and the map ``_take`` back; the
+        sensing mode."""
         self._kbatch = _kernel.AVAILABLE
         if not self._kbatch:
             return
@@ -1075,7 +1076,13 @@ class Engine:
         assert widths == [n * self.q, self.mem_dim, n * d, n * d], widths
         # distinct columns only: pos' and vel' are columns of x' for the integrators
         uniq, take = np.unique(mk, axis=1, return_inverse=True)
-        self._Mc = np.ascontiguousarray(uniq)
+        self._Mc = uniq
+        csc = sp.csc_array(uniq)  # its nonzeros column by column, rows increasing, for _kernel.linear_rows
+        csc.sort_indices()
+        self._Mc_csc = tuple(
+            np.ascontiguousarray(v, dtype=t)
+            for v, t in ((csc.indptr, np.int64), (csc.indices, np.int64), (csc.data, np.float64))
+        )
         self._take = np.ascontiguousarray(take.reshape(-1), dtype=np.int64)
         self._hfit = np.hstack([self.fw.positions, np.ones((n, 1))])
         self._box = np.ascontiguousarray(np.stack(self.bounds).astype(np.float64))
@@ -1202,7 +1209,7 @@ class Engine:
         pos, vel = np.empty((B, n, d)), np.empty((B, n, d))
         mem = np.zeros((B, 0)) if state.memory is None else np.ascontiguousarray(state.memory.reshape(B, -1))
         x, ref0 = np.ascontiguousarray(state.x.reshape(B, -1)), np.ascontiguousarray(state.ref)
-        lin = (x, af, mem, ref0, self._Mc, self._take)
+        lin = (x, af, mem, ref0, *self._Mc_csc, self._take)
         obs, dist, flags, re = out = self._kernel_outputs(B)
         meas = (pos, np.ascontiguousarray(state.pos), vel, ref, af * af, np.ascontiguousarray(state.goal_dist))
         T = self.num_threads

@@ -290,24 +290,45 @@ def test_draw_plan_errors():
         DrawPlan([Draw("a", kind="gamma")])
 
 
-def test_vec_env_replays_engine_resets_with_many_redraws():
-    """Hold with 7 crowded followers (most start draws are redrawn) and short episodes: env b equals an
-    engine stepped alone and reset from the generator of seed + b, episode after episode."""
+#: Hold with a wide success test (1.5 m, one sample): episodes end at different steps.
+_EARLY_ENDS = {"max_cycles": 9, "goal_tol": 1.5, "formation_tol": 0.3, "hold_steps": 1}
+
+
+@pytest.mark.parametrize(
+    ("scenario", "kwargs", "draw_ahead", "scale"),
+    [
+        ("hold", {"framework": "many", "follower_noise": 0.5, "max_cycles": 4}, 0, 0.3),
+        ("hold", {"framework": "many", "follower_noise": 0.5, "max_cycles": 4}, 3, 0.3),
+        ("hold", _EARLY_ENDS, 0, 1.0),
+        ("hold", _EARLY_ENDS, 2, 1.0),
+    ],
+)
+def test_vec_env_replays_engine_resets_with_many_redraws(scenario, kwargs, draw_ahead, scale):
+    """Env b equals an engine stepped alone and reset from the generator of seed + b, episode after episode,
+    whether the next episodes are drawn when needed (``draw_ahead`` 0) or ahead in batches; also through a
+    ``reset()`` without a new seed, which starts every env's next episode (a spare one where it was drawn
+    ahead). Hold with 7 crowded followers: most start draws are redrawn, every episode is cut at 4 steps;
+    hold with a wide success test: episodes end at different steps, so spares wait for their env."""
     B, seed = 5, 3
-    eng = _engine("hold", {"framework": "many", "follower_noise": 0.5, "max_cycles": 4})
-    venv = FormationVecEnv(num_envs=B, engine=eng, seed=seed)
+    eng = _engine(scenario, kwargs)
+    venv = FormationVecEnv(num_envs=B, engine=eng, seed=seed, draw_ahead=draw_ahead)
     obs = venv.reset()
     rngs = [np.random.default_rng(seed + b) for b in range(B)]
     singles = [eng.reset(g, 1) for g in rngs]
     nl = venv.n_l
     rng = np.random.default_rng(0)
     n_done = 0
-    for _ in range(13):
+    spares = []
+    for t in range(20):
+        if t == 5:  # a reset mid-way: every env starts its next episode
+            obs = venv.reset()
+            singles = [eng.reset(g, 1) for g in rngs]
         for b in range(B):
             np.testing.assert_allclose(obs[b * nl : (b + 1) * nl], eng.observe(singles[b])[0], **TOL)
             np.testing.assert_allclose(venv.state.pos[b], singles[b].pos[0], rtol=0, atol=1e-12)
-        act = _actions(rng, (B * nl, venv.p), 0.3)
+        act = _actions(rng, (B * nl, venv.p), scale)
         obs, _, done, infos = venv.step(act)
+        spares.append(int(venv._has_spare.sum()))
         for b in range(B):
             singles[b], o, _, te, tr, _ = eng.step(singles[b], act[b * nl : (b + 1) * nl][None])
             assert done[b * nl] == bool(te[0] or tr[0])
@@ -315,7 +336,15 @@ def test_vec_env_replays_engine_resets_with_many_redraws():
                 n_done += 1
                 np.testing.assert_allclose(infos[b * nl]["terminal_observation"], o[0, 0], **TOL)
                 singles[b] = eng.reset(rngs[b], 1)
-    assert n_done >= 3 * B
+    assert n_done >= B + 2
+    if kwargs is _EARLY_ENDS:
+        assert (max(spares) > 0) == (draw_ahead > 0)  # episodes drawn ahead waited for their env
+
+
+@pytest.mark.parametrize("bad", [-1, 1.5])
+def test_draw_ahead_must_be_a_non_negative_integer(bad):
+    with pytest.raises(FormationError, match="draw_ahead"):
+        FormationVecEnv("hold", num_envs=4, draw_ahead=bad)
 
 
 def test_infos_are_fresh_dicts_with_keys_only_where_done():

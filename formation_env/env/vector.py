@@ -19,7 +19,11 @@ is the mean of the leaders' rewards.
 Seeding and auto-reset: env b draws its episodes from its own generator
 ``np.random.default_rng(seed + b)`` (B = 1 draws each), so env b of the batch replays,
 to rounding, the single env reset with ``seed + b`` and given the same actions, episode
-after episode. A finished env is reset in the same step (SB3 convention): its slot's
+after episode. Episodes are drawn ahead: once ``draw_ahead`` envs (default B / 4) have
+used up their next episode, the next episode of every such env is drawn in one batch, since
+a reset costs much less per env in a large batch than in the ~B / 60 a step that finish. The
+draws of an env still come from its generator in order, so the episodes are the same.
+A finished env is reset in the same step (SB3 convention): its slot's
 ``info`` holds ``terminal_observation`` and, for a time-limit cut that is no true end,
 ``TimeLimit.truncated = True`` (SB3 then bootstraps its value). Other slots get empty
 info dicts; the batched engine info of the last step is ``last_info`` (arrays (B,)).
@@ -81,16 +85,32 @@ def reset_batch(engine: Engine, rngs: Sequence[np.random.Generator]) -> EngineSt
     return stack_states([engine.reset(g, 1) for g in rngs])
 
 
-def _scatter(dst: EngineState, idx: NDArray[np.int64], src: EngineState) -> None:
-    """Write ``src`` (len(idx) envs) into rows ``idx`` of ``dst``, in place (``dst`` is owned by the vec env)."""
-    for f in ("x", "pos", "vel", "memory", "k", "ref", "goal_dist", "err", "streak"):
+_FIELDS = ("x", "pos", "vel", "memory", "k", "ref", "goal_dist", "err", "streak")
+
+
+def _scatter(
+    dst: EngineState, idx: NDArray[np.int64], src: EngineState, src_idx: NDArray[np.int64] | None = None
+) -> None:
+    """Write ``src`` (len(idx) envs, or its rows ``src_idx``) into rows ``idx`` of ``dst``, in place (``dst`` is
+    owned by the vec env)."""
+    for f in _FIELDS:
         a = getattr(dst, f)
         if a is not None:
-            a[idx] = getattr(src, f)
+            a[idx] = getattr(src, f) if src_idx is None else getattr(src, f)[src_idx]
     for key, arr in dst.params.items():
         arr.setflags(write=True)
-        arr[idx] = src.params[key]
+        arr[idx] = src.params[key] if src_idx is None else src.params[key][src_idx]
         arr.setflags(write=False)
+
+
+def _own(state: EngineState) -> EngineState:
+    """A copy of ``state`` that shares no array with it (params read-only, as the engine makes them)."""
+    params = {}
+    for key, arr in state.params.items():
+        params[key] = own = np.array(arr)
+        own.setflags(write=False)
+    fields = {f: None if getattr(state, f) is None else np.array(getattr(state, f)) for f in _FIELDS}
+    return EngineState(**fields, params=params)
 
 
 class FormationVecEnv(VecEnv):
@@ -102,6 +122,8 @@ class FormationVecEnv(VecEnv):
         mode: ``"shared"`` (one slot per leader) or ``"commander"`` (one slot per env).
         seed: seed of the first reset (env b gets ``seed + b``); None draws fresh entropy.
         engine: an existing ``Engine`` to step (then ``env_kwargs`` must be empty).
+        draw_ahead: draw the next episodes of the envs that have used theirs up, in one batch, once this many
+            have (0: draw an env's next episode when it finishes). None: ``num_envs // 4``, or 0 below 8 envs.
         **env_kwargs: the ``Engine`` arguments (dynamics, follower_law, dt, max_cycles, framework, ...).
 
     Attributes:
@@ -122,6 +144,7 @@ class FormationVecEnv(VecEnv):
         *,
         engine: Engine | None = None,
         render_mode: str | None = None,
+        draw_ahead: int | None = None,
         **env_kwargs: Any,
     ) -> None:
         if mode not in MODES:
@@ -132,6 +155,10 @@ class FormationVecEnv(VecEnv):
             raise TypeError(f"pass either engine= or engine keyword arguments, not both (got {sorted(env_kwargs)})")
         if render_mode not in (None, "rgb_array"):
             raise FormationError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if draw_ahead is None:
+            draw_ahead = int(num_envs) // 4 if num_envs >= 8 else 0
+        if int(draw_ahead) != draw_ahead or draw_ahead < 0:
+            raise FormationError(f"draw_ahead must be a non-negative integer, got {draw_ahead}")
         self.engine = eng = engine if engine is not None else Engine(scenario, **env_kwargs)
         self.mode = mode
         self.n_envs = B = int(num_envs)
@@ -152,6 +179,10 @@ class FormationVecEnv(VecEnv):
         self._next_seed: int | None = seed
         self._rngs: list[np.random.Generator] = []
         self.state: EngineState | None = None
+        self.draw_ahead = int(draw_ahead)
+        self._spare: EngineState | None = None  # the next episode of each env (rows where _has_spare), drawn ahead
+        self._spare_obs: NDArray[np.float32] | None = None  # and its first observation, per slot
+        self._has_spare = np.zeros(B, dtype=bool)
         self._actions: NDArray[np.float64] | None = None
         self.last_info: dict[str, Any] = {}
         self.last_terminated = self.last_truncated = np.zeros(self.n_envs, dtype=bool)
@@ -169,6 +200,36 @@ class FormationVecEnv(VecEnv):
         """New episodes for envs ``envs``, each from its own generator (B = 1 draws, as the single env)."""
         return reset_batch(self.engine, [self._rngs[b] for b in envs])
 
+    def _slots(self, envs: NDArray[np.int64]) -> NDArray[np.int64]:
+        """The slots of envs ``envs``, env by env."""
+        k = self._per_env
+        return (envs[:, None] * k + np.arange(k)).reshape(-1) if k > 1 else envs
+
+    def _next_episodes(self, envs: NDArray[np.int64], obs: NDArray[np.float32]) -> None:
+        """Start the next episode of envs ``envs`` (sorted) in ``self.state`` and their slots of ``obs``.
+
+        With ``draw_ahead`` > 0 they come from the spares; when one of them has none, or ``draw_ahead`` envs
+        have none, every env without a spare draws its next episode first, in one batch."""
+        if self.draw_ahead == 0:
+            fresh = self._draw(envs)
+            _scatter(self.state, envs, fresh)
+            obs[self._slots(envs)] = self._observe(fresh)
+            return
+        empty = ~self._has_spare
+        if empty[envs].any() or np.count_nonzero(empty) >= self.draw_ahead:
+            fill = np.flatnonzero(empty)
+            fresh = self._draw(fill)
+            if self._spare is None:
+                self._spare = _own(self.state)
+                self._spare_obs = np.empty_like(obs)
+            _scatter(self._spare, fill, fresh)
+            self._spare_obs[self._slots(fill)] = self._observe(fresh)
+            self._has_spare[fill] = True
+        _scatter(self.state, envs, self._spare, envs)
+        slots = self._slots(envs)
+        obs[slots] = self._spare_obs[slots]
+        self._has_spare[envs] = False
+
     # ---------------------------------------------------------------- VecEnv API
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
         """Seed the next reset: env b (all its slots) gets ``seed + b``; returns the seed of every slot."""
@@ -183,13 +244,18 @@ class FormationVecEnv(VecEnv):
         if self._next_seed is not None:
             self._rngs = [np.random.default_rng(self._next_seed + b) for b in range(B)]
             self._next_seed = None
+            self._has_spare[:] = False  # drawn from the old generators
         elif not self._rngs:
             root = np.random.SeedSequence()
             self._rngs = [np.random.default_rng(s) for s in root.spawn(B)]
-        state = self._draw(np.arange(B))
-        for key, arr in state.params.items():  # own every params array: auto-resets write rows in place
-            state.params[key] = own = np.array(arr)
-            own.setflags(write=False)
+        if self._has_spare.any():  # the envs' next episodes, drawn ahead (the same generators go on)
+            state = _own(self._spare)
+            need = np.flatnonzero(~self._has_spare)
+            if need.size:
+                _scatter(state, need, self._draw(need))
+            self._has_spare[:] = False
+        else:
+            state = _own(self._draw(np.arange(B)))  # own every array: auto-resets write rows in place
         self.state = state
         self.reset_infos = [{} for _ in range(self.num_envs)]
         self._reset_options()
@@ -225,7 +291,7 @@ class FormationVecEnv(VecEnv):
         infos: list[dict[str, Any]] = marshal.loads(self._empty_infos)  # fresh empty dicts, made in C
         if done_env.any():
             envs = np.flatnonzero(done_env)
-            slots = (envs[:, None] * k + np.arange(k)).reshape(-1)
+            slots = self._slots(envs)
             final = list(obs[slots])  # rows of a copy: obs is overwritten below
             cut = (trunc[envs] & ~term[envs]).tolist()
             values = zip(*[info[key][envs].tolist() for key in _DONE_INFO], cut, strict=True)
@@ -233,9 +299,7 @@ class FormationVecEnv(VecEnv):
             for s, vals, fin in zip(slots.tolist(), per_slot, final, strict=True):
                 inf = infos[s] = dict(zip(_INFO_KEYS, vals, strict=True))
                 inf["terminal_observation"] = fin
-            fresh = self._draw(envs)
-            _scatter(state, envs, fresh)
-            obs[slots] = self._observe(fresh)
+            self._next_episodes(envs, obs)
         return obs, rews, dones, infos
 
     def close(self) -> None:

@@ -9,7 +9,8 @@
 * (b) Batched: ``FormationVecEnv`` at B = 1024 on a 10-agent framework (3 leaders, 7 followers,
   complete graph), observations and rewards computed, auto-reset included (warmed up, so that
   episodes end and restart every step as in training), with its default ``num_threads`` (the
-  CPUs the process may use) and with one thread, against VMAS on CPU at the same B:
+  CPUs the process may use) and with one thread, against VMAS on CPU at the same B (and, beside
+  it, with ``draw_ahead=0``: each finished env draws its next episode in the step it ends):
   ``simple_spread`` and ``navigation`` with 10 agents, and ``simple_spread`` with its default 3
   agents (no resets), VMAS timed with torch's default threads, ``torch.set_num_threads(2)`` and 1
   (a row per distinct count); ours on one thread is compared with VMAS's 3-agent case only. Then
@@ -251,9 +252,10 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
 
     ours_threads = default_threads()
     for scen in ("hold", "narrow_passage"):
-        for nt in dict.fromkeys((ours_threads, 1)):  # the default threads, and one thread (if they differ)
-            key = scen if nt == ours_threads else f"{scen}_t{nt}"
-            v = FormationVecEnv(scen, num_envs=B, mode="shared", seed=0, framework=fw, num_threads=nt)
+        # the default threads, one thread (if they differ), and the default threads drawing no episodes ahead
+        for nt, ahead in dict.fromkeys(((ours_threads, None), (1, None), (ours_threads, 0))):
+            key = scen + ("" if nt == ours_threads else f"_t{nt}") + ("" if ahead is None else "_ahead0")
+            v = FormationVecEnv(scen, num_envs=B, mode="shared", seed=0, framework=fw, num_threads=nt, draw_ahead=ahead)
             v.reset()
             acts = [rng.uniform(-0.3, 0.3, (v.num_envs, v.p)).astype(np.float32) for _ in range(8)]
             for i in range(100):  # into the steady state: no episode ends in the first ~15 steps, ~15 a step later
@@ -266,7 +268,9 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
                 c[1] += int(np.count_nonzero(v.last_terminated | v.last_truncated))
 
             fns[key] = step
-            labels[key] = f"FormationVecEnv {scen} B={B} n=10 (3 leaders, shared, threads={nt}"
+            labels[key] = f"FormationVecEnv {scen} B={B} n=10 (3 leaders, shared, threads={nt}" + (
+                "" if ahead is None else ", draw_ahead=0: each finished env draws its next episode"
+            )
     rows: list[Row] = []
     if _have("vmas"):
         import torch
@@ -303,8 +307,12 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
         labels[key] += f", auto-reset: {n_resets / max(n_steps, 1):.1f} envs reset a step)"
     peers = {k: v for k, v in rates.items() if k.startswith("vmas")}
     out: list[Row] = []
-    for key in resets:  # ours at its default threads against every VMAS case; on one thread against VMAS n=3
+    for key in resets:  # ours at its default threads against every VMAS case, the others against VMAS n=3
         mine = peers if key in ("hold", "narrow_passage") else {k: v for k, v in peers.items() if "_n3" in k}
+        if key.endswith("_ahead0"):  # and drawing ahead (the default) against not (ratio > 1: ahead faster)
+            base = key.removesuffix("_ahead0")
+            out += _compare_rows("b", {base: rates[base], key: rates[key]}, base, "env-steps/s", None, labels)[1:]
+            continue
         out += _compare_rows("b", {key: rates[key], **mine}, key, "env-steps/s", 3.0, labels)
     return out + rows
 

@@ -95,9 +95,11 @@ def _scatter(
     owned by the vec env)."""
     for f in _FIELDS:
         a = getattr(dst, f)
-        if a is not None:
+        if a is not None and a.size:
             a[idx] = getattr(src, f) if src_idx is None else getattr(src, f)[src_idx]
     for key, arr in dst.params.items():
+        if not arr.size:  # no obstacles of that kind: nothing to copy (a fancy copy costs ~4 us even so)
+            continue
         arr.setflags(write=True)
         arr[idx] = src.params[key] if src_idx is None else src.params[key][src_idx]
         arr.setflags(write=False)

@@ -45,7 +45,10 @@ __all__ = [
     "PaperLinearLaw",
     "StressFeedbackLaw",
     "gamma_interval",
+    "jacobi_modes",
     "make_law",
+    "spectral_radius",
+    "stress_modes",
 ]
 
 LAWS = ("stationary", "linear", "linear_paper", "dynamic", "dynamic_distributed")
@@ -53,11 +56,29 @@ LAWS = ("stationary", "linear", "linear_paper", "dynamic", "dynamic_distributed"
 Array = NDArray[np.float64]
 
 
-def _spectral_radius(mats: Array) -> float:
-    """Largest |eigenvalue| over a stack of square matrices, shape (k, s, s)."""
+def spectral_radius(mats: Array) -> float:
+    """Largest |eigenvalue| over a stack of square matrices, shape (k, s, s) (0 for an empty stack)."""
     if mats.shape[0] == 0:
         return 0.0
     return float(np.max(np.abs(np.linalg.eigvals(mats))))
+
+
+def stress_modes(A_d: Array, B_d: Array, K: Array, eps: float, lam: Array) -> Array:
+    """Mode matrices of the stress feedback u = eps K (Omega_ff kron I) e: A_d + eps lambda B_d K for each
+    eigenvalue lambda (k,) of Omega_ff, shape (k, q, q)."""
+    return A_d[None] + eps * lam[:, None, None] * (B_d @ K)[None]
+
+
+def jacobi_modes(A_d: Array, B_d: Array, K: Array, c: Array) -> Array:
+    """Mode matrices of the dynamic-leader law with m Jacobi rounds, on the state (e, s) of error and held input:
+    c = nu^m (k,) for the Jacobi eigenvalues nu, shape (k, q + p, q + p)."""
+    q, p = B_d.shape
+    mats = np.zeros((c.size, q + p, q + p))
+    mats[:, :q, :q] = A_d[None] + (1 - c)[:, None, None] * (B_d @ K)[None]
+    mats[:, :q, q:] = c[:, None, None] * B_d[None]
+    mats[:, q:, :q] = (1 - c)[:, None, None] * K[None]
+    mats[:, q:, q:] = c[:, None, None] * np.eye(p)[None]
+    return mats
 
 
 class FollowerLaw(ABC):
@@ -125,7 +146,7 @@ class FollowerLaw(ABC):
 
     def spectral_radius(self) -> float:
         """Spectral radius of the closed-loop error dynamics (the error decay factor per step)."""
-        return _spectral_radius(self.mode_matrices())
+        return spectral_radius(self.mode_matrices())
 
     @abstractmethod
     def closed_loop(self) -> Array:
@@ -264,13 +285,12 @@ class StressFeedbackLaw(FollowerLaw):
                 f"(cond(Omega_ff) = {self.lambdas[-1] / self.lambdas[0]:.4g} is too large for this gain)"
             )
         res = minimize_scalar(
-            lambda e: _spectral_radius(self._modes(e)), bounds=(lo, hi), method="bounded", options={"xatol": 1e-10 * hi}
+            lambda e: spectral_radius(self._modes(e)), bounds=(lo, hi), method="bounded", options={"xatol": 1e-10 * hi}
         )
         return float(res.x)
 
     def _modes(self, eps: float) -> Array:
-        bk = self.B_d @ self.K
-        return self.A_d[None] + eps * self.lambdas[:, None, None] * bk[None]
+        return stress_modes(self.A_d, self.B_d, self.K, eps, self.lambdas)
 
     def control(self, x: Array, u_leaders: Array, memory: Array | None) -> tuple[Array, Array | None]:
         return self.stress_force(x) @ self._gain_t, memory
@@ -307,7 +327,7 @@ class PaperLinearLaw(StressFeedbackLaw):
         from scipy.optimize import minimize_scalar
 
         _, hi = StressFeedbackLaw.eps_range(self)
-        res = minimize_scalar(lambda e: _spectral_radius(self._literal_modes(e)), bounds=(0.0, hi), method="bounded")
+        res = minimize_scalar(lambda e: spectral_radius(self._literal_modes(e)), bounds=(0.0, hi), method="bounded")
         return float(res.x)
 
     def _literal_modes(self, eps: float) -> Array:
@@ -408,14 +428,7 @@ class DynamicLeaderLaw(FollowerLaw):
         a, b, k = self.A_d, self.B_d, self.K
         if self.rounds is None:
             return (a + b @ k)[None]
-        q, p = self.dynamics.q, self.dynamics.p
-        c = self.jacobi_eigenvalues() ** self.rounds
-        mats = np.zeros((c.size, q + p, q + p))
-        mats[:, :q, :q] = a[None] + (1 - c)[:, None, None] * (b @ k)[None]
-        mats[:, :q, q:] = c[:, None, None] * b[None]
-        mats[:, q:, :q] = (1 - c)[:, None, None] * k[None]
-        mats[:, q:, q:] = c[:, None, None] * np.eye(p)[None]
-        return mats
+        return jacobi_modes(a, b, k, self.jacobi_eigenvalues() ** self.rounds)
 
     def closed_loop(self) -> Array:
         """Exact: I kron (A_d + B_d K). Distributed: the (e, s) block matrix with J^m, shape 2 blocks."""

@@ -438,8 +438,9 @@ def linear_rows(
     and vel' are columns of x' for the integrators, so they are not computed twice).
 
     Mc comes by its nonzeros, column by column (CSC, rows increasing): column j of Mc holds
-    ``val[ptr[j]:ptr[j + 1]]`` in the rows ``row_of[ptr[j]:ptr[j + 1]]``. The stress couples each agent with few
-    others per dimension, so most of Mc is zero (82 % for 10 agents in 2D). The envs go ``LINEAR_BLOCK`` at a
+    ``val[ptr[j]:ptr[j + 1]]`` in the rows ``row_of[ptr[j]:ptr[j + 1]]``. The laws act on each dimension alike
+    (Omega kron I_d), and the integrators' blocks are sparse, so most of Mc is zero (82 % for the benchmark's 10
+    agents in 2D, a complete graph; more for sparser stresses). The envs go ``LINEAR_BLOCK`` at a
     time, transposed, so that each nonzero of Mc is one multiply-add over a contiguous block of envs (SIMD).
     Every output sums its terms from zero in the order of z, as the dense product row by row does, and the
     terms left out are exact zeros, so for finite z the result has the same bits as that dense product.
@@ -496,25 +497,12 @@ def linear_rows(
 
 
 @njit(cache=True, nogil=True)
-def step_rows(
-    b0: int,
-    b1: int,
-    x: np.ndarray,
-    a: np.ndarray,
-    mem: np.ndarray,
-    ref0: np.ndarray,
-    ptr: np.ndarray,
-    row_of: np.ndarray,
-    val: np.ndarray,
-    take: np.ndarray,
-    x_o: np.ndarray,
-    mem_o: np.ndarray,
-    *measure: Any,
-) -> None:
-    """A whole batched step for envs b0 <= b < b1: ``linear_rows`` (from the old row ``ref0``) into x_o, mem_o
-    and ``measure``'s pos and vel, then ``measure_rows(b0, b1, *measure)`` on the new positions (``measure``:
-    ``measure_rows``'s arguments from ``pos`` on, with the new row ``ref``)."""
-    linear_rows(b0, b1, x, a, mem, ref0, ptr, row_of, val, take, x_o, mem_o, measure[0], measure[2])
+def step_rows(b0: int, b1: int, linear: tuple[np.ndarray, ...], *measure: Any) -> None:
+    """A whole batched step for envs b0 <= b < b1: ``linear_rows(b0, b1, *linear, pos, vel)`` (``linear``: its
+    arguments from ``x`` to ``mem_o``, with the old row ``ref``) into ``measure``'s pos and vel, then
+    ``measure_rows(b0, b1, *measure)`` on the new positions (``measure``: ``measure_rows``'s arguments from
+    ``pos`` on, with the new row ``ref``)."""
+    linear_rows(b0, b1, *linear, measure[0], measure[2])
     measure_rows(b0, b1, *measure)
 
 

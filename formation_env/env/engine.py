@@ -1217,7 +1217,9 @@ class Engine:
             _kernel.run_rows(_kernel.linear_rows, B, T, *lin, x_o, mem_o, pos, vel)
             _kernel.run_rows(_kernel.measure_rows, B, T, *meas, *self._geometry_args(pos, params), *out)
         else:
-            _kernel.run_rows(_kernel.step_rows, B, T, *lin, x_o, mem_o, *meas, *self._geometry_args(pos, params), *out)
+            _kernel.run_rows(
+                _kernel.step_rows, B, T, (*lin, x_o, mem_o), *meas, *self._geometry_args(pos, params), *out
+            )
         err, clear = dist[:, nl], dist[:, nl + 2].copy()
         collision = clear < 0.0
         if flags.any():  # left the world box, or an agent was fast: swept checks
@@ -1322,8 +1324,8 @@ class Engine:
             when ``observe`` is False (a caller that observes ``global_state`` only skips the sensing).
 
         States from ``reset(rng, 1)`` of static-goal scenarios (n <= ``ALL_PAIRS_UP_TO``, the default success
-        test) carry the episode's folded feature map (``_fold_episode``) and take a fast path: the same maths
-        in about 30 numpy calls, since at this size numpy's ~1 us per call is the whole cost. It equals the
+        test) carry the episode's folded feature map (``_fold_episode``) and take a fast path: one compiled call
+        (``_kernel.step1``), since at this size numpy's ~1 us per call would be the whole cost. It equals the
         batched step up to rounding (tests). Other states go through ``step``.
         """
         params = state.params

@@ -34,7 +34,15 @@ from numpy.typing import ArrayLike, NDArray
 from formation_env.core.analysis import extreme_eigenvalues
 from formation_env.core.dynamics import LinearDynamics, riccati_gain
 from formation_env.core.errors import FormationError
-from formation_env.core.laws import DynamicLeaderLaw, FollowerLaw, gamma_interval, make_law
+from formation_env.core.laws import (
+    DynamicLeaderLaw,
+    FollowerLaw,
+    gamma_interval,
+    jacobi_modes,
+    make_law,
+    spectral_radius,
+    stress_modes,
+)
 from formation_env.core.stress import Partition
 
 from . import geometry
@@ -107,28 +115,6 @@ def _jacobi_spectrum(law: DynamicLeaderLaw) -> Array:
     return np.linspace(1.0 - hi, 1.0 - lo, INTERVAL_POINTS)
 
 
-def _radius(mats: Array) -> float:
-    """Largest |eigenvalue| over a stack (k, s, s)."""
-    return float(np.max(np.abs(np.linalg.eigvals(mats)))) if mats.shape[0] else 0.0
-
-
-def _stress_modes(A_d: Array, B_d: Array, K: Array, eps: float, lam: Array) -> Array:
-    """A_d + eps lambda B_d K for each lambda, shape (k, q, q) (``StressFeedbackLaw.mode_matrices``)."""
-    return A_d[None] + eps * lam[:, None, None] * (B_d @ K)[None]
-
-
-def _jacobi_modes(A_d: Array, B_d: Array, K: Array, nu: Array, rounds: int) -> Array:
-    """The (e, s) mode matrices of m Jacobi rounds, c = nu^m (``DynamicLeaderLaw.mode_matrices``)."""
-    q, p = B_d.shape
-    c = nu**rounds
-    mats = np.zeros((c.size, q + p, q + p))
-    mats[:, :q, :q] = A_d[None] + (1 - c)[:, None, None] * (B_d @ K)[None]
-    mats[:, :q, q:] = c[:, None, None] * B_d[None]
-    mats[:, q:, :q] = (1 - c)[:, None, None] * K[None]
-    mats[:, q:, q:] = c[:, None, None] * np.eye(p)[None]
-    return mats
-
-
 def make_swarm_law(
     omega: Any, leaders: tuple[int, ...], dyn: LinearDynamics, law_name: str, dt: float, params: dict[str, Any]
 ) -> tuple[FollowerLaw, float]:
@@ -153,7 +139,7 @@ def make_swarm_law(
         if not lo_e < hi_e:
             raise FormationError(f"no eps stabilises every mode: need eps in ({lo_e:.4g}, {hi_e:.4g}), which is empty")
         res = minimize_scalar(
-            lambda e: _radius(_stress_modes(A_d, B_d, K, e, lam)), bounds=(lo_e, hi_e), method="bounded"
+            lambda e: spectral_radius(stress_modes(A_d, B_d, K, e, lam)), bounds=(lo_e, hi_e), method="bounded"
         )
         params["eps"] = float(res.x)
     if law_name == "dynamic_distributed":
@@ -162,15 +148,15 @@ def make_swarm_law(
         nu = _jacobi_spectrum(probe)
         if "rounds" not in params:
             rounds = next(
-                (m for m in range(1, 31) if _radius(_jacobi_modes(A_d, B_d, probe.K, nu, m)) < 1.0),
+                (m for m in range(1, 31) if spectral_radius(jacobi_modes(A_d, B_d, probe.K, nu**m)) < 1.0),
                 1,
             )
             params["rounds"] = rounds
         law = make_law(law_name, part, dyn, dt, **params)
-        return law, _radius(_jacobi_modes(A_d, B_d, probe.K, nu, int(params["rounds"])))
+        return law, spectral_radius(jacobi_modes(A_d, B_d, probe.K, nu ** int(params["rounds"])))
     law = make_law(law_name, part, dyn, dt, **params)
     if law_name in ("stationary", "linear"):
-        return law, _radius(_stress_modes(law.A_d, law.B_d, law.K, law.eps, lam))  # type: ignore[attr-defined]
+        return law, spectral_radius(stress_modes(law.A_d, law.B_d, law.K, law.eps, lam))  # type: ignore[attr-defined]
     return law, float(law.spectral_radius())
 
 

@@ -21,7 +21,7 @@ Seeding and auto-reset: env b draws its episodes from its own generator
 to rounding, the single env reset with ``seed + b`` and given the same actions, episode
 after episode. Episodes are drawn ahead: once ``draw_ahead`` envs (default B / 4) have
 used up their next episode, the next episode of every such env is drawn in one batch, since
-a reset costs much less per env in a large batch than in the ~B / 60 a step that finish. The
+a reset costs much less per env in a large batch than in the few envs that finish in a step. The
 draws of an env still come from its generator in order, so the episodes are the same.
 A finished env is reset in the same step (SB3 convention): its slot's
 ``info`` holds ``terminal_observation`` and, for a time-limit cut that is no true end,

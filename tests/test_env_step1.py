@@ -310,6 +310,25 @@ def test_compiled_observe_and_reset_equal_numpy(scenario, dynamics, law):
         np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-6)
 
 
+@pytest.mark.parametrize("where", ["worker", "caller"])
+def test_run_rows_raises_a_chunks_error_and_goes_on(where):
+    """An error in any chunk (a worker's or this thread's) reaches the caller once every chunk has stopped, and
+    the worker threads serve the next call."""
+    m = _kernel.MIN_ROWS_PER_THREAD
+
+    def fn(b0: int, b1: int, out: np.ndarray) -> None:
+        if (b0 > 0) == (where == "worker"):
+            raise ZeroDivisionError(f"rows {b0}-{b1}")
+        out[b0:b1] = 1.0
+
+    out = np.zeros(2 * m)
+    with pytest.raises(ZeroDivisionError, match="rows"):
+        _kernel.run_rows(fn, 2 * m, 2, out)
+    assert out.sum() == m  # the other chunk ran to its end
+    _kernel.run_rows(lambda b0, b1, o: o.__setitem__(slice(b0, b1), 2.0), 2 * m, 2, out)
+    assert np.all(out == 2.0)
+
+
 def _step_large_batch(queue) -> None:  # in a forked child: the parent's worker threads do not exist here
     eng = Engine("narrow_passage", num_threads=2)
     s = eng.reset(np.random.default_rng(0), 2 * _kernel.MIN_ROWS_PER_THREAD)

@@ -36,16 +36,32 @@ except ImportError:  # pragma: no cover - exercised only where numba is missing
         return lambda f: f
 
 
+try:  # the compiled draws (draw_runs, settle_starts) call numpy's bit generators through their C function pointers
+    from llvmlite import ir
+    from numba import types
+    from numba.extending import intrinsic
+    from numba.np.random._constants import fi_double, ki_double, wi_double, ziggurat_nor_inv_r, ziggurat_nor_r
+
+    DRAWS = AVAILABLE
+except ImportError:  # pragma: no cover - numba without its Generator support: the draws stay in Python
+    DRAWS = False
+
+
 __all__ = [
     "AVAILABLE",
+    "DRAWS",
     "LAYOUT",
     "SENSE_CONST",
     "SENSE_GIVEN",
     "SENSE_WALLS",
+    "bit_generators",
+    "copy_rows",
     "default_threads",
+    "draw_runs",
     "linear_rows",
     "measure_rows",
     "run_rows",
+    "settle_starts",
     "step1",
     "step_rows",
 ]
@@ -534,7 +550,7 @@ def run_rows(fn: Any, B: int, threads: int, *args: Any) -> None:
 
     ``fn`` is one of the ``*_rows`` kernels: compiled with the GIL released, and writing only its own rows,
     so the result is the same for any number of threads. Chunks have at least ``MIN_ROWS_PER_THREAD`` rows;
-    this thread runs the first one.
+    this thread runs the first one. An error in a chunk is raised once every chunk has stopped.
     """
     nt = max(1, min(int(threads), B // MIN_ROWS_PER_THREAD))
     if nt == 1:
@@ -542,7 +558,11 @@ def run_rows(fn: Any, B: int, threads: int, *args: Any) -> None:
         return
     cuts = [B * t // nt for t in range(nt + 1)]
     futures = [_pool(nt - 1).submit(fn, cuts[t], cuts[t + 1], *args) for t in range(1, nt)]
-    fn(0, cuts[1], *args)
+    try:
+        fn(0, cuts[1], *args)
+    finally:
+        for f in futures:
+            f.exception()  # wait: no chunk may still write when the caller goes on (or sees an error)
     for f in futures:
         f.result()
 
@@ -592,6 +612,56 @@ def global_state(
     return out
 
 
+@njit(cache=True)
+def copy_rows(dst: tuple[np.ndarray, ...], idx: np.ndarray, src: tuple[np.ndarray, ...], src_idx: np.ndarray) -> None:
+    """``dst[t][idx[i]] = src[t][src_idx[i]]`` for every array t and row i: one call in place of a fancy copy per
+    array (~4 us each, even for a few rows). dst, src: tuples of (B, row bytes) uint8 views, row sizes equal
+    pairwise; idx, src_idx: (m,) int64."""
+    for t in range(len(dst)):
+        d, s = dst[t], src[t]
+        for i in range(idx.shape[0]):
+            d[idx[i], :] = s[src_idx[i], :]
+
+
+@njit(cache=True, error_model="numpy")
+def _move_and_test(
+    out: np.ndarray,
+    base: np.ndarray,
+    b: int,
+    dirs: np.ndarray,
+    rad: np.ndarray,
+    followers: np.ndarray,
+    gap: float,
+    trial: np.ndarray,
+) -> bool:
+    """One episode of ``noisy_starts``: the followers of episode b moved from ``base[b]`` by ``dirs`` (n_f, d) (scaled
+    to unit length) times ``rad`` (n_f,) into ``trial`` (n, d), then the all-pairs test; ``out[b]`` gets them if it
+    passes."""
+    n, d, nf = base.shape[1], base.shape[2], followers.shape[0]
+    trial[:] = base[b]
+    for k in range(nf):
+        acc = 0.0
+        for c in range(d):
+            acc += dirs[k, c] * dirs[k, c]
+        norm = np.sqrt(acc)
+        i = followers[k]
+        for c in range(d):
+            trial[i, c] += dirs[k, c] / norm * rad[k]
+    least = np.inf
+    for i in range(n):
+        for j in range(i + 1, n):
+            acc = 0.0
+            for c in range(d):
+                v = trial[i, c] - trial[j, c]
+                acc += v * v
+            if acc < least or acc != acc:  # a NaN stays, as in numpy's min
+                least = acc
+    ok = np.sqrt(least) >= gap
+    if ok:
+        out[b] = trial
+    return ok
+
+
 @njit(cache=True, error_model="numpy")
 def noisy_starts(
     out: np.ndarray,
@@ -618,34 +688,147 @@ def noisy_starts(
     Returns:
         ok (m,): no two agents of episode ``todo[i]`` closer than ``gap`` (a NaN distance fails).
     """
-    n, d = base.shape[1], base.shape[2]
-    m, nf = todo.shape[0], followers.shape[0]
-    trial = np.empty((n, d))
+    m = todo.shape[0]
+    trial = np.empty((base.shape[1], base.shape[2]))
     ok = np.empty(m, dtype=np.bool_)
     for e in range(m):
-        b = todo[e]
-        trial[:] = base[b]
-        for k in range(nf):
-            acc = 0.0
-            for c in range(d):
-                acc += dirs[e, k, c] * dirs[e, k, c]
-            norm = np.sqrt(acc)
-            i = followers[k]
-            for c in range(d):
-                trial[i, c] += dirs[e, k, c] / norm * rad[e, k]
-        least = np.inf
-        for i in range(n):
-            for j in range(i + 1, n):
-                acc = 0.0
-                for c in range(d):
-                    v = trial[i, c] - trial[j, c]
-                    acc += v * v
-                if acc < least or acc != acc:  # a NaN stays, as in numpy's min
-                    least = acc
-        ok[e] = np.sqrt(least) >= gap
-        if ok[e]:
-            out[b] = trial
+        ok[e] = _move_and_test(out, base, todo[e], dirs[e], rad[e], followers, gap, trial)
     return ok
+
+
+# ------------------------------------------------------------------ draws from numpy's bit generators
+_BITGEN_FNS: dict[type, np.ndarray] = {}
+
+
+def bit_generators(rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndarray] | None:
+    """(state addresses (m,) int64, [next_uint64, next_double] addresses (2,) int64) of the generators' bit
+    generators, for ``draw_runs`` and ``settle_starts``; None without the compiled draws or when the bit generators
+    are of more than one kind. The caller keeps the generators alive and uses none of them elsewhere meanwhile."""
+    if not (AVAILABLE and DRAWS) or not rngs:
+        return None
+    kind = type(rngs[0].bit_generator)
+    fns = _BITGEN_FNS.get(kind)
+    if fns is None:
+        import ctypes
+
+        c = rngs[0].bit_generator.ctypes
+        fns = np.array([ctypes.cast(f, ctypes.c_void_p).value for f in (c.next_uint64, c.next_double)], np.int64)
+        _BITGEN_FNS[kind] = fns
+    addr = np.empty(len(rngs), dtype=np.int64)
+    for i, g in enumerate(rngs):
+        bg = g.bit_generator
+        if type(bg) is not kind:
+            return None
+        addr[i] = bg.ctypes.state_address
+    return addr, fns
+
+
+if DRAWS:
+
+    @intrinsic
+    def _next_uint64(typingctx: Any, fn: Any, state: Any) -> Any:
+        """``fn(state)`` for the addresses fn (``uint64_t (*)(void *)``) and state (int64)."""
+        if not (isinstance(fn, types.Integer) and isinstance(state, types.Integer)):
+            return None
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            vp = ir.IntType(8).as_pointer()
+            f = builder.inttoptr(args[0], ir.FunctionType(ir.IntType(64), [vp]).as_pointer())
+            return builder.call(f, [builder.inttoptr(args[1], vp)])
+
+        return types.uint64(fn, state), codegen
+
+    @intrinsic
+    def _next_double(typingctx: Any, fn: Any, state: Any) -> Any:
+        """``fn(state)`` for the addresses fn (``double (*)(void *)``) and state (int64)."""
+        if not (isinstance(fn, types.Integer) and isinstance(state, types.Integer)):
+            return None
+
+        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+            vp = ir.IntType(8).as_pointer()
+            f = builder.inttoptr(args[0], ir.FunctionType(ir.DoubleType(), [vp]).as_pointer())
+            return builder.call(f, [builder.inttoptr(args[1], vp)])
+
+        return types.float64(fn, state), codegen
+
+    @njit(cache=True)
+    def _standard_normal(fns: np.ndarray, state: int) -> float:
+        """numpy's ``random_standard_normal`` (the ziggurat of ``Generator.standard_normal``, its tables as numba
+        keeps them), on the bit generator at ``state``."""
+        while True:
+            r = _next_uint64(fns[0], state)
+            idx = r & np.uint64(0xFF)
+            r >>= np.uint64(8)
+            sign = r & np.uint64(1)
+            rabs = (r >> np.uint64(1)) & np.uint64(0x000FFFFFFFFFFFFF)
+            x = float(rabs) * wi_double[idx]
+            if sign:
+                x = -x
+            if rabs < ki_double[idx]:
+                return x
+            if idx == 0:
+                while True:
+                    xx = -ziggurat_nor_inv_r * np.log1p(-_next_double(fns[1], state))
+                    yy = -np.log1p(-_next_double(fns[1], state))
+                    if yy + yy > xx * xx:
+                        return -(ziggurat_nor_r + xx) if (rabs >> np.uint64(8)) & np.uint64(1) else ziggurat_nor_r + xx
+            elif (fi_double[idx - 1] - fi_double[idx]) * _next_double(fns[1], state) + fi_double[idx] < np.exp(
+                -0.5 * x * x
+            ):
+                return x
+
+    @njit(cache=True)
+    def _fill(row: np.ndarray, kind: int, fns: np.ndarray, state: int) -> None:
+        """``Generator.random(out=row)`` (kind 0) or ``Generator.standard_normal(out=row)`` (kind 1)."""
+        if kind == 0:
+            for j in range(row.shape[0]):
+                row[j] = _next_double(fns[1], state)
+        else:
+            for j in range(row.shape[0]):
+                row[j] = _standard_normal(fns, state)
+
+    @njit(cache=True)
+    def draw_runs(raw: np.ndarray, addr: np.ndarray, fns: np.ndarray, runs: np.ndarray) -> None:
+        """``DrawPlan.draw_each`` compiled: for each generator b in turn, its runs of same-kind draws into its row
+        of ``raw`` (B, K); ``runs`` (r, 3) int64 rows [kind (0 uniform, 1 normal), start, stop]. The same numbers
+        as numpy's calls (tests)."""
+        for b in range(raw.shape[0]):
+            for t in range(runs.shape[0]):
+                _fill(raw[b, runs[t, 1] : runs[t, 2]], runs[t, 0], fns, addr[b])
+
+    @njit(cache=True, error_model="numpy")
+    def settle_starts(
+        out: np.ndarray,
+        base: np.ndarray,
+        dirs: np.ndarray,
+        u: np.ndarray,
+        followers: np.ndarray,
+        gap: float,
+        noise: float,
+        inv_d: float,
+        tries: int,
+        addr: np.ndarray,
+        fns: np.ndarray,
+    ) -> None:
+        """``Scenario._settle`` with ``noisy_starts``, compiled, episode by episode: the followers of episode b moved
+        by its draws ``dirs[b]`` (n_f, d) and ``u[b]`` (n_f,) (radius ``noise`` u^inv_d m); while two agents are
+        closer than ``gap``, new draws from generator b (standard normal directions, then uniform u, as
+        ``_noise_plan``), ``tries`` draws in all. ``out`` (B, n, d), a copy of ``base``, gets the positions that
+        pass (the others keep ``base``). u^(1/2) is a square root, as numpy's ``u ** 0.5``."""
+        nf, d = dirs.shape[1], dirs.shape[2]
+        dr, uu, rad = np.empty((nf, d)), np.empty(nf), np.empty(nf)
+        trial = np.empty((base.shape[1], d))
+        for b in range(base.shape[0]):
+            dr[:] = dirs[b]
+            uu[:] = u[b]
+            for t in range(max(tries, 1)):
+                if t > 0:
+                    _fill(dr.reshape(-1), 1, fns, addr[b])
+                    _fill(uu, 0, fns, addr[b])
+                for k in range(nf):
+                    rad[k] = noise * (np.sqrt(uu[k]) if inv_d == 0.5 else uu[k] ** inv_d)
+                if _move_and_test(out, base, b, dr, rad, followers, gap, trial):
+                    break
 
 
 @njit(cache=True, error_model="numpy")

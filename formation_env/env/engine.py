@@ -1220,7 +1220,7 @@ class Engine:
             _kernel.run_rows(
                 _kernel.step_rows, B, T, (*lin, x_o, mem_o), *meas, *self._geometry_args(pos, params), *out
             )
-        err, clear = dist[:, nl], dist[:, nl + 2].copy()
+        err, clear = dist[:, nl].copy(), dist[:, nl + 2].copy()  # contiguous: vec envs copy state rows as bytes
         collision = clear < 0.0
         if flags.any():  # left the world box, or an agent was fast: swept checks
             oob = flags[:, 0].copy()
@@ -1243,7 +1243,7 @@ class Engine:
             mem_o.reshape(B, self.n_f, self.p) if self.mem_dim else None,
             k,
             ref,
-            dist[:, :nl],
+            dist[:, :nl].copy(),
             err,
             streak,
             params,

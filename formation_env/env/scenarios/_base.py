@@ -252,9 +252,19 @@ class Scenario:
         if type(self).draws is Scenario.draws:
             eps = [self.reset(g, 1) for g in rngs]
             return {key: np.concatenate([ep[key] for ep in eps]) for key in eps[0]}
-        raw = self._plan.draw_each(rngs)
+        bits = _kernel.bit_generators(list(rngs)) if self._plan.runs is not None else None
+        raw = self._plan.draw_each(rngs, bits)
         params, pose = self.build(raw)
-        if pose is not None:
+        if pose is None:
+            return params
+        if bits is not None and "_u" in raw and self.fw.n <= ALL_PAIRS_GAP_UP_TO:  # the redraws compiled too
+            base = affine_batch(self.r, *pose)
+            params["start"] = start = base.copy()
+            dirs, u = (np.ascontiguousarray(raw[key]) for key in ("_dirs", "_u"))
+            gap3 = 3.0 * self.agent_radius
+            f = (start, base, dirs, u, self._follower_index, gap3, self.follower_noise, 1.0 / self.d)
+            _kernel.settle_starts(*f, self.start_tries, *bits)
+        else:
             params["start"] = self._place_start(
                 pose, raw, lambda todo: self._noise_plan.draw_each([rngs[b] for b in todo.tolist()])
             )
@@ -459,6 +469,11 @@ class DrawPlan:
             k += size
         self.K = k
         self.calls = [(str(c[0]), int(c[1]), int(c[2])) for c in calls]
+        #: the calls as rows [kind (0 uniform, 1 normal), start, stop] for ``_kernel.draw_runs``; None with sign draws
+        self.runs: NDArray[np.int64] | None = None
+        if all(c[0] != "sign" for c in self.calls):
+            code = {"uniform": 0, "normal": 1}
+            self.runs = np.array([(code[c[0]], c[1], c[2]) for c in self.calls], dtype=np.int64).reshape(-1, 3)
         lo_a, span_a = np.array(lo), np.array(span)
         kinds = np.array(
             [dr.kind for dr in self.draws for _ in range(self.cols[dr.name].start, self.cols[dr.name].stop)]
@@ -483,13 +498,19 @@ class DrawPlan:
                 out[dr.name] = rng.choice([-1.0, 1.0], size=size)
         return out
 
-    def draw_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
-        """One episode per generator: entry b equals ``draw(rngs[b], 1)``; the Python work per generator
-        is one call per run of same-kind draws. Each run is drawn from every generator in turn (distinct
-        generators: each still makes its calls in the plan's order)."""
+    def draw_each(
+        self, rngs: Sequence[np.random.Generator], bits: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
+    ) -> dict[str, Array]:
+        """One episode per generator: entry b equals ``draw(rngs[b], 1)``. With ``bits`` (``_kernel.bit_generators``
+        of ``rngs``, for plans without sign draws) every call is compiled (``_kernel.draw_runs``); else the Python
+        work per generator is one call per run of same-kind draws, each run drawn from every generator in turn
+        (distinct generators: each still makes its calls in the plan's order)."""
         B = len(rngs)
         raw = np.zeros((B, self.K))
-        for kind, a, b in self.calls:
+        if bits is not None and self.runs is not None:
+            _kernel.draw_runs(raw, *bits, self.runs)
+        calls = self.calls if bits is None or self.runs is None else []
+        for kind, a, b in calls:
             rows = raw[:, a:b]
             if kind == "uniform":
                 for g, row in zip(rngs, rows, strict=True):

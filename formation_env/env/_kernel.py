@@ -725,31 +725,26 @@ def bit_generators(rngs: list[np.random.Generator]) -> tuple[np.ndarray, np.ndar
 
 if DRAWS:
 
-    @intrinsic
-    def _next_uint64(typingctx: Any, fn: Any, state: Any) -> Any:
-        """``fn(state)`` for the addresses fn (``uint64_t (*)(void *)``) and state (int64)."""
-        if not (isinstance(fn, types.Integer) and isinstance(state, types.Integer)):
-            return None
+    def _bitgen_call(ret: Any, ret_ir: Any) -> Any:
+        """An intrinsic ``call(fn, state)``: the C function at address fn (``ret (*)(void *)``, a bit generator's
+        ``next_uint64`` or ``next_double``) on the state at address state (both int64)."""
 
-        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-            vp = ir.IntType(8).as_pointer()
-            f = builder.inttoptr(args[0], ir.FunctionType(ir.IntType(64), [vp]).as_pointer())
-            return builder.call(f, [builder.inttoptr(args[1], vp)])
+        @intrinsic
+        def call(typingctx: Any, fn: Any, state: Any) -> Any:
+            if not (isinstance(fn, types.Integer) and isinstance(state, types.Integer)):
+                return None
 
-        return types.uint64(fn, state), codegen
+            def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
+                vp = ir.IntType(8).as_pointer()
+                f = builder.inttoptr(args[0], ir.FunctionType(ret_ir, [vp]).as_pointer())
+                return builder.call(f, [builder.inttoptr(args[1], vp)])
 
-    @intrinsic
-    def _next_double(typingctx: Any, fn: Any, state: Any) -> Any:
-        """``fn(state)`` for the addresses fn (``double (*)(void *)``) and state (int64)."""
-        if not (isinstance(fn, types.Integer) and isinstance(state, types.Integer)):
-            return None
+            return ret(fn, state), codegen
 
-        def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
-            vp = ir.IntType(8).as_pointer()
-            f = builder.inttoptr(args[0], ir.FunctionType(ir.DoubleType(), [vp]).as_pointer())
-            return builder.call(f, [builder.inttoptr(args[1], vp)])
+        return call
 
-        return types.float64(fn, state), codegen
+    _next_uint64 = _bitgen_call(types.uint64, ir.IntType(64))
+    _next_double = _bitgen_call(types.float64, ir.DoubleType())
 
     @njit(cache=True)
     def _standard_normal(fns: np.ndarray, state: int) -> float:

@@ -509,18 +509,18 @@ class DrawPlan:
         raw = np.zeros((B, self.K))
         if bits is not None and self.runs is not None:
             _kernel.draw_runs(raw, *bits, self.runs)
-        calls = self.calls if bits is None or self.runs is None else []
-        for kind, a, b in calls:
-            rows = raw[:, a:b]
-            if kind == "uniform":
-                for g, row in zip(rngs, rows, strict=True):
-                    g.random(out=row)
-            elif kind == "normal":
-                for g, row in zip(rngs, rows, strict=True):
-                    g.standard_normal(out=row)
-            else:
-                for g, row in zip(rngs, rows, strict=True):
-                    row[:] = g.integers(0, 2, size=b - a)
+        else:
+            for kind, a, b in self.calls:
+                rows = raw[:, a:b]
+                if kind == "uniform":
+                    for g, row in zip(rngs, rows, strict=True):
+                        g.random(out=row)
+                elif kind == "normal":
+                    for g, row in zip(rngs, rows, strict=True):
+                        g.standard_normal(out=row)
+                else:
+                    for g, row in zip(rngs, rows, strict=True):
+                        row[:] = g.integers(0, 2, size=b - a)
         if self._sign.size:
             raw[:, self._sign] = 2.0 * raw[:, self._sign] - 1.0  # choice([-1, 1]) picks index integers(0, 2)
         for cols, lo, span in self._scaled:

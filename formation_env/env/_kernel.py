@@ -26,7 +26,8 @@ from typing import Any
 import numpy as np
 
 try:  # numba is a dependency; the env still works (slower at B = 1) without it
-    from numba import njit
+    import numba
+    from numba import njit, prange
 
     AVAILABLE = True
 except ImportError:  # pragma: no cover - exercised only where numba is missing
@@ -34,6 +35,8 @@ except ImportError:  # pragma: no cover - exercised only where numba is missing
 
     def njit(*args: Any, **kwargs: Any) -> Any:  # type: ignore[no-redef]
         return lambda f: f
+
+    prange = range
 
 
 try:  # the compiled draws (draw_runs, settle_starts) call numpy's bit generators through their C function pointers
@@ -60,6 +63,7 @@ __all__ = [
     "draw_runs",
     "linear_rows",
     "measure_rows",
+    "native_threads",
     "run_rows",
     "settle_starts",
     "step1",
@@ -226,6 +230,10 @@ def step1(
     return out, obs, nv, rew, np.array([clear, worst, gmin, 0.0])
 
 
+#: Env rows ``measure_rows`` takes at a time, transposed (its loops then run over envs: SIMD).
+MEASURE_BLOCK = 32
+
+
 @njit(cache=True, nogil=True)
 def measure_rows(
     b0: int,
@@ -263,7 +271,10 @@ def measure_rows(
     positions, written into rows [b0, b1) of ``obs``, ``dist``, ``flags`` and ``rew`` (and nothing else).
 
     The same quantities as ``Engine.step``'s numpy code (the reference, compared in tests), computed
-    directly from positions instead of through the folded feature matrices.
+    directly from positions instead of through the folded feature matrices. The envs go ``MEASURE_BLOCK``
+    at a time, transposed, so that each loop runs over a block of envs (SIMD, branch-free minima); each
+    env's arithmetic keeps one order, so its result does not depend on the block or the rows' split.
+    The rays go env by env, SIMD over the rays (their maps are too large to transpose cheaply).
 
     Args:
         b0, b1: the env rows to compute.
@@ -291,141 +302,257 @@ def measure_rows(
     P = pairs.shape[0]
     kc = P + n * C + n * S
     nd = n * d
+    nt = thr.shape[1]
+    na = a2.shape[1]
+    nw = rew.shape[1]
+    nf = na + 2 * nl
+    rw = 2 * S * R if mode == 2 else 0
     sqn = np.sqrt(float(n))
-    coef = np.empty((d + 1, d))
-    lin = np.empty(L1)
-    for b in range(b0, b1):
-        flags[b, 0] = False
-        flags[b, 1] = False
-        for j in range(rew.shape[1]):
-            rew[b, j] = 0.0
-        p = pos[b]
-        clear = np.inf
+    W = MEASURE_BLOCK
+    pt = np.empty((nd, W))  # the block's positions, transposed: row i d + c is p[i, c] of each env
+    qt = np.empty((nd, W))  # previous positions
+    vt = np.empty((nl * d, W))  # leaders' velocities
+    gt = np.empty((2 * nd + 2, W))  # ref
+    tt = np.empty((nt, W))  # thresholds
+    ct = np.empty((C * d, W))  # circle centres
+    wt = np.empty(((d + 1) * 3 * S, W))  # wall maps
+    th = np.empty(rw)  # one leader's ray parameters T and AH, per env
+    ft = np.empty((nf, W))  # reward features [a2, gprev, goal distances of the leaders]
+    coef = np.empty(((d + 1) * d, W))
+    lin = np.empty((L1, W))
+    acc = np.empty(W)
+    clear = np.empty(W)
+    worst = np.empty(W)
+    gmax = np.empty(W)
+    err = np.empty(W)
+    oob = np.empty(W, dtype=np.bool_)
+    fst = np.empty(W, dtype=np.bool_)
+    rt = np.empty((nw, W))
+    best = np.empty(max(W, R))
+    for s0 in range(b0, b1, W):
+        m = min(W, b1 - s0)
+        for e in range(m):  # the block, transposed: then every loop below runs over envs (SIMD)
+            b = s0 + e
+            for i in range(n):
+                for c in range(d):
+                    pt[i * d + c, e] = pos[b, i, c]
+                    qt[i * d + c, e] = prev[b, i, c]
+            for li in range(nl):
+                for c in range(d):
+                    vt[li * d + c, e] = vel[b, leaders[li], c]
+            for j in range(2 * nd + 2):
+                gt[j, e] = ref[b, j]
+            for j in range(nt):
+                tt[j, e] = thr[b, j]
+            for j in range(C):
+                for c in range(d):
+                    ct[j * d + c, e] = circles[b, j, c]
+            for r in range(d + 1):
+                for j in range(3 * S):
+                    wt[r * 3 * S + j, e] = walls[b, r, j]
+            for j in range(na):
+                ft[j, e] = a2[b, j]
+            for j in range(nl):
+                ft[na + j, e] = gprev[b, j]
+        for e in range(m):
+            clear[e] = np.inf
         for k in range(P):  # agent pairs
             i, j = pairs[k, 0], pairs[k, 1]
-            acc = 0.0
+            for e in range(m):
+                acc[e] = 0.0
             for c in range(d):
-                v = p[i, c] - p[j, c]
-                acc += v * v
-            v = np.sqrt(acc) - thr[b, k]
-            if v < clear:
-                clear = v
+                pi, pj = pt[i * d + c], pt[j * d + c]
+                for e in range(m):
+                    v = pi[e] - pj[e]
+                    acc[e] += v * v
+            tk = tt[k]
+            for e in range(m):
+                v = np.sqrt(acc[e]) - tk[e]
+                cl = clear[e]
+                clear[e] = v if v < cl else cl
         for i in range(n):
             for j in range(C):  # agent-circle
-                acc = 0.0
+                for e in range(m):
+                    acc[e] = 0.0
                 for c in range(d):
-                    v = p[i, c] - circles[b, j, c]
-                    acc += v * v
-                v = np.sqrt(acc) - thr[b, P + i * C + j]
-                if v < clear:
-                    clear = v
+                    pi, cj = pt[i * d + c], ct[j * d + c]
+                    for e in range(m):
+                        v = pi[e] - cj[e]
+                        acc[e] += v * v
+                tk = tt[P + i * C + j]
+                for e in range(m):
+                    v = np.sqrt(acc[e]) - tk[e]
+                    cl = clear[e]
+                    clear[e] = v if v < cl else cl
             for s in range(S):  # agent-wall: distance across, and excess along the wall
-                across = walls[b, d, s]
-                along = walls[b, d, S + s]
-                back = walls[b, d, 2 * S + s]
-                for c in range(d):
-                    across += p[i, c] * walls[b, c, s]
-                    along += p[i, c] * walls[b, c, S + s]
-                    back += p[i, c] * walls[b, c, 2 * S + s]
-                ex = max(along, back, 0.0)
-                v = np.sqrt(across * across + ex * ex) - thr[b, P + n * C + i * S + s]
-                if v < clear:
-                    clear = v
-        worst = -np.inf
-        gmax = 0.0
+                tk = tt[P + n * C + i * S + s]
+                o = d * 3 * S
+                for e in range(m):
+                    across = wt[o + s, e]
+                    along = wt[o + S + s, e]
+                    back = wt[o + 2 * S + s, e]
+                    for c in range(d):
+                        pc = pt[i * d + c, e]
+                        across += pc * wt[c * 3 * S + s, e]
+                        along += pc * wt[c * 3 * S + S + s, e]
+                        back += pc * wt[c * 3 * S + 2 * S + s, e]
+                    ex = along if along > back else back
+                    ex = ex if ex > 0.0 else 0.0
+                    v = np.sqrt(across * across + ex * ex) - tk[e]
+                    cl = clear[e]
+                    clear[e] = v if v < cl else cl
+        for e in range(m):
+            worst[e] = -np.inf
+            gmax[e] = 0.0
         for k in range(n):  # goal distances, leaders first
             i = perm[k]
-            acc = 0.0
+            for e in range(m):
+                acc[e] = 0.0
             for c in range(d):
-                v = ref[b, i * d + c] - p[i, c]
-                acc += v * v
-            g = np.sqrt(acc)
-            if g > gmax:
-                gmax = g
-            if k < nl:
-                dist[b, k] = g
-            v = g - thr[b, kc + k]
-            if v > worst:
-                worst = v
+                gi, pi = gt[i * d + c], pt[i * d + c]
+                for e in range(m):
+                    v = gi[e] - pi[e]
+                    acc[e] += v * v
+            tk = tt[kc + k]
+            for e in range(m):
+                g = np.sqrt(acc[e])
+                gm = gmax[e]
+                gmax[e] = g if g > gm else gm
+                if k < nl:
+                    ft[na + nl + k, e] = g
+                v = g - tk[e]
+                wo = worst[e]
+                worst[e] = v if v > wo else wo
         for r in range(d + 1):  # affine fit, then the RMS residual
             for c in range(d):
-                acc = 0.0
-                for m in range(n):
-                    acc += pinv[r, m] * p[m, c]
-                coef[r, c] = acc
-        acc = 0.0
-        for m in range(n):
+                cf = coef[r * d + c]
+                for e in range(m):
+                    cf[e] = 0.0
+                for q in range(n):
+                    w = pinv[r, q]
+                    pq = pt[q * d + c]
+                    for e in range(m):
+                        cf[e] += w * pq[e]
+        for e in range(m):
+            acc[e] = 0.0
+        for q in range(n):
             for c in range(d):
-                v = p[m, c]
-                for r in range(d + 1):
-                    v -= hfit[m, r] * coef[r, c]
-                acc += v * v
-        err = np.sqrt(acc) / sqn
-        v = err - thr[b, kc + n]
-        if v > worst:
-            worst = v
-        dist[b, nl] = err
-        dist[b, nl + 1] = gmax
-        dist[b, nl + 2] = clear
-        dist[b, nl + 3] = worst
+                pq = pt[q * d + c]
+                for e in range(m):
+                    v = pq[e]
+                    for r in range(d + 1):
+                        v -= hfit[q, r] * coef[r * d + c, e]
+                    acc[e] += v * v
+        tk = tt[kc + n]
+        for e in range(m):
+            er = np.sqrt(acc[e]) / sqn
+            err[e] = er
+            v = er - tk[e]
+            wo = worst[e]
+            worst[e] = v if v > wo else wo
+        for e in range(m):
+            oob[e] = False
+            fst[e] = False
         for i in range(n):  # world box and fast agents
             for c in range(d):
-                if p[i, c] < box[0, c] or p[i, c] > box[1, c]:
-                    flags[b, 0] = True
-                if abs(p[i, c] - prev[b, i, c]) > fast:
-                    flags[b, 1] = True
-        tk = ref[b, 2 * nd + 1] * inv_cycles
+                lo, hi = box[0, c], box[1, c]
+                pi, qi = pt[i * d + c], qt[i * d + c]
+                for e in range(m):
+                    v = pi[e]
+                    oob[e] |= (v < lo) | (v > hi)
+                    fst[e] |= abs(v - qi[e]) > fast
+        for j in range(nw):  # reward tail: [a2, gprev, goal distances] @ w_tail
+            rj = rt[j]
+            for e in range(m):
+                rj[e] = 0.0
+            for i in range(nf):
+                w = w_tail[i, j]
+                fi = ft[i]
+                for e in range(m):
+                    f = fi[e]
+                    x = rj[e]
+                    rj[e] = x + f * w if f != 0.0 else x
+        for e in range(m):
+            b = s0 + e
+            flags[b, 0] = oob[e]
+            flags[b, 1] = fst[e]
+            for k in range(nl):
+                dist[b, k] = ft[na + nl + k, e]
+            dist[b, nl] = err[e]
+            dist[b, nl + 1] = gmax[e]
+            dist[b, nl + 2] = clear[e]
+            dist[b, nl + 3] = worst[e]
+            for j in range(nw):
+                rew[b, j] = rt[j, e]
+        tk2 = 2 * nd + 1
         for li in range(nl):  # observations (layout: Engine.obs_blocks)
             a = leaders[li]
             o = 0
             for c in range(d):
-                lin[o + c] = p[a, c]
-                lin[o + d + c] = vel[b, a, c]
+                pa, va = pt[a * d + c], vt[li * d + c]
+                la, lb = lin[o + c], lin[o + d + c]
+                for e in range(m):
+                    la[e] = pa[e]
+                    lb[e] = va[e]
             o += 2 * d
             for lj in range(nl):
                 if lj != li:
                     for c in range(d):
-                        lin[o + c] = p[leaders[lj], c] - p[a, c]
+                        pa, pb, lo_ = pt[a * d + c], pt[leaders[lj] * d + c], lin[o + c]
+                        for e in range(m):
+                            lo_[e] = pb[e] - pa[e]
                     o += d
             for c in range(d):
-                lin[o + c] = ref[b, a * d + c] - p[a, c]
-                lin[o + d + c] = ref[b, nd + a * d + c]
+                pa, ga, gv = pt[a * d + c], gt[a * d + c], gt[nd + a * d + c]
+                la, lb = lin[o + c], lin[o + d + c]
+                for e in range(m):
+                    la[e] = ga[e] - pa[e]
+                    lb[e] = gv[e]
             o += 2 * d
             for i_ in range(d):  # Theta[i_, j_] = sum_m pinv[j_, m] p_m[i_]: row i_ of Theta is column i_ of coef
                 for j_ in range(d):
-                    lin[o + i_ * d + j_] = coef[j_, i_]
+                    cf, lo_ = coef[j_ * d + i_], lin[o + i_ * d + j_]
+                    for e in range(m):
+                        lo_[e] = cf[e]
             o += d * d
-            lin[o] = tk
+            gk, lo_ = gt[tk2], lin[o]
+            for e in range(m):
+                lo_[e] = gk[e] * inv_cycles
             for j in range(L1):
-                v = lin[j]
-                if v < lin_lo[li, j]:
-                    v = lin_lo[li, j]
-                if v > lin_hi[li, j]:
-                    v = lin_hi[li, j]
-                obs[b, li, j] = v
-            obs[b, li, L1] = err if err < err_hi else err_hi
-            if mode == 2:  # 2D rays: T / sensor range of the first hit inside a wall, else 1
+                lo, hi, lj_ = lin_lo[li, j], lin_hi[li, j], lin[j]
+                for e in range(m):
+                    v = lj_[e]
+                    v = lo if v < lo else v
+                    lj_[e] = hi if v > hi else v
+            if mode == 2:  # 2D rays: T / sensor range of the first hit inside a wall, else 1 (per env, SIMD over rays)
                 sr = S * R
-                for r in range(R):
-                    best = 1.0
-                    for s in range(S):
-                        t = rays[b, d, s * R + r]
-                        h = rays[b, d, sr + s * R + r]
-                        for c in range(d):
-                            t += p[a, c] * rays[b, c, s * R + r]
-                            h += p[a, c] * rays[b, c, sr + s * R + r]
-                        if t >= 0.0 and abs(h) <= 1.0 and t < best:
-                            best = t
-                    obs[b, li, L1 + 1 + r] = best
+                for e in range(m):
+                    b = s0 + e
+                    yd = rays[b, d]
+                    for j in range(rw):
+                        th[j] = yd[j]
+                    for c in range(d):
+                        pc, yc = pt[a * d + c, e], rays[b, c]
+                        for j in range(rw):
+                            th[j] += pc * yc[j]
+                    for r in range(R):
+                        best[r] = 1.0
+                    for s in range(S):  # branch-free, SIMD over rays
+                        for r in range(R):
+                            t, h, bt = th[s * R + r], th[sr + s * R + r], best[r]
+                            best[r] = t if (t >= 0.0) & (abs(h) <= 1.0) & (t < bt) else bt
+                    for r in range(R):
+                        obs[b, li, L1 + 1 + r] = best[r]
             else:
-                for j in range(od - L1 - 1):
-                    obs[b, li, L1 + 1 + j] = sense_in[b, li, j]
-        na = a2.shape[1]
-        for i in range(na + 2 * nl):  # reward tail: [a2, gprev, goal distances] @ w_tail
-            f = a2[b, i] if i < na else (gprev[b, i - na] if i < na + nl else dist[b, i - na - nl])
-            if f != 0.0:
-                for j in range(w_tail.shape[1]):
-                    rew[b, j] += f * w_tail[i, j]
+                for e in range(m):
+                    for j in range(od - L1 - 1):
+                        obs[s0 + e, li, L1 + 1 + j] = sense_in[s0 + e, li, j]
+            for e in range(m):
+                b = s0 + e
+                for j in range(L1):
+                    obs[b, li, j] = lin[j, e]
+                er = err[e]
+                obs[b, li, L1] = er if er < err_hi else err_hi
 
 
 #: Env rows ``linear_rows`` takes at a time (its transposed blocks then stay in the L1/L2 cache).
@@ -545,16 +672,83 @@ def _pool(workers: int) -> ThreadPoolExecutor:
         return _POOL["pool"]
 
 
+@njit(cache=True, nogil=True, parallel=True)
+def _linear_rows_par(B: int, nt: int, *args: Any) -> None:
+    """``linear_rows`` over [0, B) in ``nt`` chunks on numba's native threads."""
+    for t in prange(nt):
+        linear_rows(B * t // nt, B * (t + 1) // nt, *args)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _measure_rows_par(B: int, nt: int, *args: Any) -> None:
+    """``measure_rows`` over [0, B) in ``nt`` chunks on numba's native threads."""
+    for t in prange(nt):
+        measure_rows(B * t // nt, B * (t + 1) // nt, *args)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _step_rows_par(B: int, nt: int, linear: tuple[np.ndarray, ...], *measure: Any) -> None:
+    """``step_rows`` over [0, B) in ``nt`` chunks on numba's native threads."""
+    for t in prange(nt):
+        step_rows(B * t // nt, B * (t + 1) // nt, linear, *measure)
+
+
+@njit(cache=True, nogil=True, parallel=True)
+def _launch(out: np.ndarray) -> None:
+    """Starts numba's threading layer (so that ``numba.threading_layer()`` names it)."""
+    for t in prange(out.shape[0]):
+        out[t] = t
+
+
+#: The ``*_rows`` kernels' twins on numba's native threads (``run_rows`` prefers them, see ``native_threads``).
+_PARALLEL: dict[Any, Any] = {linear_rows: _linear_rows_par, measure_rows: _measure_rows_par, step_rows: _step_rows_par}
+#: ``FORMATION_ENV_NATIVE_THREADS=0`` keeps ``run_rows`` on the Python worker threads.
+NATIVE_THREADS = os.environ.get("FORMATION_ENV_NATIVE_THREADS", "1") != "0"
+_NATIVE: dict[str, Any] = {"pid": -1, "ok": False, "layer": None}
+
+
+def native_threads() -> bool:
+    """Whether ``run_rows`` splits its kernels over numba's native threads (``prange``) in this process.
+
+    They start in tens of microseconds, where a Python worker thread must first take the GIL (a few hundred at
+    B = 1024 on a 2-core VM), so the split pays off. Used with a threading layer that is safe from several
+    Python threads at once ("omp", "tbb"; not "workqueue"), and never in a process forked after this one
+    launched them: GNU OpenMP is not fork-safe, so a forked child uses the Python worker threads."""
+    pid = os.getpid()
+    if _NATIVE["pid"] == pid:
+        return bool(_NATIVE["ok"])
+    if not (AVAILABLE and NATIVE_THREADS):
+        return False
+    with _POOL_LOCK:
+        if _NATIVE["pid"] == -1:
+            layer = None
+            try:
+                _launch(np.zeros(2))
+                layer = numba.threading_layer()
+            except Exception:  # pragma: no cover - no threading layer could start: the Python threads serve
+                pass
+            _NATIVE.update(pid=pid, ok=layer in ("omp", "tbb"), layer=layer)
+        elif _NATIVE["pid"] != pid:  # forked from the process that launched them
+            return False
+        return bool(_NATIVE["ok"])
+
+
 def run_rows(fn: Any, B: int, threads: int, *args: Any) -> None:
     """``fn(b0, b1, *args)`` over the env rows [0, B) in up to ``threads`` contiguous chunks at once.
 
     ``fn`` is one of the ``*_rows`` kernels: compiled with the GIL released, and writing only its own rows,
-    so the result is the same for any number of threads. Chunks have at least ``MIN_ROWS_PER_THREAD`` rows;
-    this thread runs the first one. An error in a chunk is raised once every chunk has stopped.
+    so the result is the same for any number of threads. Chunks have at least ``MIN_ROWS_PER_THREAD`` rows.
+    The chunks of the compiled kernels go on numba's native threads where ``native_threads()``; else (and for
+    any other ``fn``) on Python worker threads, this thread running the first one. An error in a chunk is
+    raised once every chunk has stopped.
     """
     nt = max(1, min(int(threads), B // MIN_ROWS_PER_THREAD))
     if nt == 1:
         fn(0, B, *args)
+        return
+    par = _PARALLEL.get(fn)
+    if par is not None and native_threads():
+        par(B, nt, *args)
         return
     cuts = [B * t // nt for t in range(nt + 1)]
     futures = [_pool(nt - 1).submit(fn, cuts[t], cuts[t + 1], *args) for t in range(1, nt)]

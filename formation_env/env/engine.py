@@ -1042,21 +1042,31 @@ class Engine:
         cols = self._cols
         oob = out[:, cols["box"]].min(axis=1) < 0.0
         collision |= oob
-        if out[:, cols["speed"]].min() < 0.0:
-            self._swept(prev, pos, params, clear, collision)
+        fast = out[:, cols["speed"]].min(axis=1) < 0.0
+        if fast.any():
+            self._swept(prev, pos, params, clear, collision, fast)
         return oob
 
     def _swept(
-        self, prev: Array, pos: Array, params: dict[str, Array], clear: Array, collision: NDArray[np.bool_]
+        self,
+        prev: Array,
+        pos: Array,
+        params: dict[str, Array],
+        clear: Array,
+        collision: NDArray[np.bool_],
+        fast: NDArray[np.bool_],
     ) -> None:
         """Swept contacts of the motions ``prev`` -> ``pos`` (B, n, d) with walls and circles (so that a fast
-        agent cannot tunnel); updates ``clear`` and ``collision`` (B,) in place."""
+        agent cannot tunnel), in the envs where ``fast`` (B,) bool (the others' motions are too short to
+        tunnel); updates ``clear`` and ``collision`` (B,) in place."""
+        rows = np.flatnonzero(fast)
+        p0, p1 = prev[rows], pos[rows]
         if self.n_seg:
-            collision |= geometry.segment_crossings(prev, pos, params["_a"], params["_e"]).any(axis=1)
+            collision[rows] |= geometry.segment_crossings(p0, p1, params["_a"][rows], params["_e"][rows]).any(axis=1)
         if self.n_circ:
-            cc = geometry.circle_clearance(prev, pos, params["circles"]).min(axis=(1, 2)) - self.agent_radius
-            np.minimum(clear, cc, out=clear)
-            collision |= cc < 0.0
+            cc = geometry.circle_clearance(p0, p1, params["circles"][rows]).min(axis=(1, 2)) - self.agent_radius
+            clear[rows] = np.minimum(clear[rows], cc)
+            collision[rows] |= cc < 0.0
 
     # ------------------------------------------------------------------ the batched compiled step
     def _build_kernel_batch(self) -> None:
@@ -1226,7 +1236,7 @@ class Engine:
             oob = flags[:, 0].copy()
             collision |= oob
             if flags[:, 1].any():
-                self._swept(state.pos, pos, params, clear, collision)
+                self._swept(state.pos, pos, params, clear, collision, flags[:, 1])
         else:
             oob = self._false(B)
         if self._fused_success:

@@ -13,7 +13,9 @@
   it, with ``draw_ahead=0``: each finished env draws its next episode in the step it ends):
   ``simple_spread`` and ``navigation`` with 10 agents, and ``simple_spread`` with its default 3
   agents (no resets), VMAS timed with torch's default threads, ``torch.set_num_threads(2)`` and 1
-  (a row per distinct count); ours on one thread is compared with VMAS's 3-agent case only. Then
+  (a row per distinct count); ours on one thread is compared with VMAS's 3-agent case only, and
+  so is ours through Gymnasium's vector API (``to_gymnasium()``: infos as arrays, as VMAS gives
+  them, where SB3's ``VecEnv`` API needs a dict per slot, 3,072 at B = 1024). Then
   all of (b) again in a subprocess with OpenBLAS, OpenMP and MKL on one thread
   (``OPENBLAS_NUM_THREADS=1`` etc.; torch then defaults to one thread). Env-steps/s = B / step
   time. Target >= 3x.
@@ -271,6 +273,22 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
             labels[key] = f"FormationVecEnv {scen} B={B} n=10 (3 leaders, shared, threads={nt}" + (
                 "" if ahead is None else ", draw_ahead=0: each finished env draws its next episode"
             )
+        # the same env through Gymnasium's vector API: infos as arrays, as VMAS returns them (no per-slot dicts)
+        key = scen + "_gym"
+        g = FormationVecEnv(scen, num_envs=B, mode="shared", seed=0, framework=fw).to_gymnasium()
+        g.reset()
+        gacts = [rng.uniform(-0.3, 0.3, g.action_space.shape).astype(np.float32) for _ in range(8)]
+        for i in range(100):
+            g.step(gacts[i & 7])
+        resets[key] = gc = [0, 0]
+
+        def gstep(g: Any = g, acts: list[np.ndarray] = gacts, c: list[int] = gc) -> None:
+            g.step(acts[c[0] & 7])
+            c[0] += 1
+            c[1] += int(np.count_nonzero(g.venv.last_terminated | g.venv.last_truncated))
+
+        fns[key] = gstep
+        labels[key] = f"FormationVecEnv {scen} B={B} n=10 via Gymnasium's vector API (threads={ours_threads}"
     rows: list[Row] = []
     if _have("vmas"):
         import torch

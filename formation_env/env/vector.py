@@ -314,8 +314,13 @@ class FormationVecEnv(VecEnv):
         """Store the actions of every slot: (num_envs, p) shared, (num_envs, n_l p) commander."""
         self._actions = np.asarray(actions, dtype=np.float64)
 
-    def step_wait(self) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], list[dict[str, Any]]]:
-        """Step all B envs, auto-reset the finished ones; (obs, rewards, dones, infos) per slot."""
+    def _step_slots(
+        self,
+    ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], NDArray[np.int64], NDArray[np.float32]]:
+        """Step all B envs and auto-reset the finished ones, with no per-slot Python objects: (obs, rewards,
+        dones) per slot, the finished envs (sorted; empty if none) and their slots' last observations, rows
+        of a copy. The engine's info arrays and flags stay in ``last_info``, ``last_terminated``,
+        ``last_truncated``."""
         if self._actions is None:
             raise RuntimeError("step_wait called before step_async")
         if self.state is None:
@@ -337,18 +342,28 @@ class FormationVecEnv(VecEnv):
             rews = (rew.sum(axis=1) * (1.0 / self.n_l)).astype(np.float32)
         done_env = term | trunc
         dones = np.repeat(done_env, k) if k > 1 else done_env.copy()
-        infos: list[dict[str, Any]] = pickle.loads(self._empty_infos)  # fresh empty dicts, made in C
-        if done_env.any():
-            envs = np.flatnonzero(done_env)
-            slots = self._slots(envs)
-            final = list(obs[slots])  # rows of a copy: obs is overwritten below
-            cut = (trunc[envs] & ~term[envs]).tolist()
-            values = zip(*[info[key][envs].tolist() for key in _DONE_INFO], cut, strict=True)
-            per_slot = [v for v in values for _ in range(k)]
-            for s, vals, fin in zip(slots.tolist(), per_slot, final, strict=True):
-                inf = infos[s] = dict(zip(_INFO_KEYS, vals, strict=True))
-                inf["terminal_observation"] = fin
+        envs = np.flatnonzero(done_env)
+        final = obs[self._slots(envs)]  # a copy: obs is overwritten next
+        if envs.size:
             self._next_episodes(envs, obs)
+        return obs, rews, dones, envs, final
+
+    def _done_infos(self, envs: NDArray[np.int64]) -> list[dict[str, Any]]:
+        """The info of each slot of the finished envs ``envs`` (env by env): ``last_info``'s scalars and
+        ``TimeLimit.truncated``; one dict per slot."""
+        info, term, trunc = self.last_info, self.last_terminated, self.last_truncated
+        cut = (trunc[envs] & ~term[envs]).tolist()
+        values = zip(*[info[key][envs].tolist() for key in _DONE_INFO], cut, strict=True)
+        return [dict(zip(_INFO_KEYS, v, strict=True)) for v in values for _ in range(self._per_env)]
+
+    def step_wait(self) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], list[dict[str, Any]]]:
+        """Step all B envs, auto-reset the finished ones; (obs, rewards, dones, infos) per slot."""
+        obs, rews, dones, envs, final = self._step_slots()
+        infos: list[dict[str, Any]] = pickle.loads(self._empty_infos)  # fresh empty dicts, made in C
+        if envs.size:
+            for s, inf, fin in zip(self._slots(envs).tolist(), self._done_infos(envs), list(final), strict=True):
+                inf["terminal_observation"] = fin
+                infos[s] = inf
         return obs, rews, dones, infos
 
     def close(self) -> None:
@@ -434,21 +449,22 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
     def step(
         self, actions: ArrayLike
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
-        """Step every slot; see the class docstring for the info layout."""
+        """Step every slot; see the class docstring for the info layout (no per-slot dicts but the finished
+        slots' ``final_info``)."""
         v = self.venv
         v.step_async(actions)
-        obs, rews, dones, infos = v.step_wait()
+        obs, rews, dones, envs, final = v._step_slots()
         k = v._per_env
         term = np.repeat(v.last_terminated, k)
         trunc = np.repeat(v.last_truncated, k)
         info: dict[str, Any] = {}
-        if dones.any():
+        if envs.size:
+            slots = v._slots(envs)
             final_obs = np.full(self.num_envs, None, dtype=object)
             final_info = np.full(self.num_envs, None, dtype=object)
-            for s in np.flatnonzero(dones):
-                final_obs[s] = infos[s].pop("terminal_observation")
-                infos[s].pop("TimeLimit.truncated", None)
-                final_info[s] = infos[s]
+            for s, inf, fin in zip(slots.tolist(), v._done_infos(envs), list(final), strict=True):
+                del inf["TimeLimit.truncated"]
+                final_obs[s], final_info[s] = fin, inf
             info = {"final_obs": final_obs, "_final_obs": dones.copy(), "final_info": final_info, "_final_info": dones}
         return obs, rews, term, trunc, info
 

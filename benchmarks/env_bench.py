@@ -254,41 +254,32 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
 
     ours_threads = default_threads()
     for scen in ("hold", "narrow_passage"):
-        # the default threads, one thread (if they differ), and the default threads drawing no episodes ahead
-        for nt, ahead in dict.fromkeys(((ours_threads, None), (1, None), (ours_threads, 0))):
+        # the default threads, one thread (if they differ), the default threads drawing no episodes ahead, and
+        # the default through Gymnasium's vector API (infos as arrays, as VMAS returns them: no per-slot dicts)
+        variants = ((ours_threads, None, False), (1, None, False), (ours_threads, 0, False), (ours_threads, None, True))
+        for nt, ahead, gym_api in dict.fromkeys(variants):
             key = scen + ("" if nt == ours_threads else f"_t{nt}") + ("" if ahead is None else "_ahead0")
+            key += "_gym" if gym_api else ""
             v = FormationVecEnv(scen, num_envs=B, mode="shared", seed=0, framework=fw, num_threads=nt, draw_ahead=ahead)
-            v.reset()
+            env: Any = v.to_gymnasium() if gym_api else v
+            env.reset()
             acts = [rng.uniform(-0.3, 0.3, (v.num_envs, v.p)).astype(np.float32) for _ in range(8)]
             for i in range(100):  # into the steady state: no episode ends in the first ~15 steps, ~15 a step later
-                v.step(acts[i & 7])
+                env.step(acts[i & 7])
             resets[key] = c = [0, 0]  # steps, auto-resets
 
-            def step(v: FormationVecEnv = v, acts: list[np.ndarray] = acts, c: list[int] = c) -> None:
-                v.step(acts[c[0] & 7])
+            def step(env: Any = env, v: FormationVecEnv = v, acts: list[np.ndarray] = acts, c: list[int] = c) -> None:
+                env.step(acts[c[0] & 7])
                 c[0] += 1
                 c[1] += int(np.count_nonzero(v.last_terminated | v.last_truncated))
 
             fns[key] = step
-            labels[key] = f"FormationVecEnv {scen} B={B} n=10 (3 leaders, shared, threads={nt}" + (
-                "" if ahead is None else ", draw_ahead=0: each finished env draws its next episode"
+            labels[key] = f"FormationVecEnv {scen} B={B} n=10 " + (
+                f"via Gymnasium's vector API (threads={nt}"
+                if gym_api
+                else f"(3 leaders, shared, threads={nt}"
+                + ("" if ahead is None else ", draw_ahead=0: each finished env draws its next episode")
             )
-        # the same env through Gymnasium's vector API: infos as arrays, as VMAS returns them (no per-slot dicts)
-        key = scen + "_gym"
-        g = FormationVecEnv(scen, num_envs=B, mode="shared", seed=0, framework=fw).to_gymnasium()
-        g.reset()
-        gacts = [rng.uniform(-0.3, 0.3, g.action_space.shape).astype(np.float32) for _ in range(8)]
-        for i in range(100):
-            g.step(gacts[i & 7])
-        resets[key] = gc = [0, 0]
-
-        def gstep(g: Any = g, acts: list[np.ndarray] = gacts, c: list[int] = gc) -> None:
-            g.step(acts[c[0] & 7])
-            c[0] += 1
-            c[1] += int(np.count_nonzero(g.venv.last_terminated | g.venv.last_truncated))
-
-        fns[key] = gstep
-        labels[key] = f"FormationVecEnv {scen} B={B} n=10 via Gymnasium's vector API (threads={ours_threads}"
     rows: list[Row] = []
     if _have("vmas"):
         import torch

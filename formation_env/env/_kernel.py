@@ -328,7 +328,7 @@ def measure_rows(
     oob = np.empty(W, dtype=np.bool_)
     fst = np.empty(W, dtype=np.bool_)
     rt = np.empty((nw, W))
-    best = np.empty(max(W, R))
+    best = np.empty(R)  # one leader's readings, per env
     for s0 in range(b0, b1, W):
         m = min(W, b1 - s0)
         for e in range(m):  # the block, transposed: then every loop below runs over envs (SIMD)
@@ -704,7 +704,7 @@ def _launch(out: np.ndarray) -> None:
 _PARALLEL: dict[Any, Any] = {linear_rows: _linear_rows_par, measure_rows: _measure_rows_par, step_rows: _step_rows_par}
 #: ``FORMATION_ENV_NATIVE_THREADS=0`` keeps ``run_rows`` on the Python worker threads.
 NATIVE_THREADS = os.environ.get("FORMATION_ENV_NATIVE_THREADS", "1") != "0"
-_NATIVE: dict[str, Any] = {"pid": -1, "ok": False, "layer": None}
+_NATIVE: dict[str, Any] = {"pid": -1, "ok": False}
 
 
 def native_threads() -> bool:
@@ -727,7 +727,7 @@ def native_threads() -> bool:
                 layer = numba.threading_layer()
             except Exception:  # pragma: no cover - no threading layer could start: the Python threads serve
                 pass
-            _NATIVE.update(pid=pid, ok=layer in ("omp", "tbb"), layer=layer)
+            _NATIVE.update(pid=pid, ok=layer in ("omp", "tbb"))
         elif _NATIVE["pid"] != pid:  # forked from the process that launched them
             return False
         return bool(_NATIVE["ok"])

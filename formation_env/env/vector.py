@@ -343,9 +343,10 @@ class FormationVecEnv(VecEnv):
         done_env = term | trunc
         dones = np.repeat(done_env, k) if k > 1 else done_env.copy()
         envs = np.flatnonzero(done_env)
+        if not envs.size:
+            return obs, rews, dones, envs, obs[:0]
         final = obs[self._slots(envs)]  # a copy: obs is overwritten next
-        if envs.size:
-            self._next_episodes(envs, obs)
+        self._next_episodes(envs, obs)
         return obs, rews, dones, envs, final
 
     def _done_infos(self, envs: NDArray[np.int64]) -> list[dict[str, Any]]:

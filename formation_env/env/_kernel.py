@@ -101,6 +101,7 @@ def step1(
     M: np.ndarray,
     M1: np.ndarray,
     thr: np.ndarray,
+    walls: np.ndarray,
     rays: np.ndarray,
     sense_in: np.ndarray,
     gprev: np.ndarray,
@@ -117,7 +118,8 @@ def step1(
         M: the folded step (Z, C) (see ``Engine._build_static``); M1: the episode's feature map (Z, C1)
             (see ``Engine._fold_episode``).
         thr: contact / goal / formation thresholds (Kc + n + 1,), m.
-        rays: per-episode ray map (d + 1, 2 S R): a leader's [p, 1] -> (T, AH) per wall and ray.
+        walls: the episode's wall map (d + 1, 3 S): [p, 1] -> (across, along - length, -along) per wall;
+        rays: its ray map (2, S R): G and U per wall and ray (``wall_maps``).
         sense_in: the sensing when ``sense_mode`` is SENSE_CONST or SENSE_GIVEN, shape (n_l, ks).
         gprev: the leaders' goal distances before the step (n_l,), m.
         w_tail: the reward map's rows for [a^2 (n_l p), gprev, goal distances after], shape (., 2 n_l).
@@ -197,20 +199,23 @@ def step1(
                 v = hi
             obs[li, j] = v
         obs[li, L1] = err if err < err_hi else err_hi
-        if mode == 2:  # 2D rays: T / sensor range of the first hit inside a wall, else 1
-            sr = S * R
+        if mode == 2:  # 2D rays: T / sensor range of the first hit inside a wall, else 1 (as ``measure_rows``)
+            best = np.ones(R)
+            for s in range(S):
+                across, aml, back = walls[d, s], walls[d, S + s], walls[d, 2 * S + s]
+                for c in range(d):
+                    p = out[laug0 + li * (d + 1) + c]
+                    across += p * walls[c, s]
+                    aml += p * walls[c, S + s]
+                    back += p * walls[c, 2 * S + s]
+                f = -across
+                for r in range(R):
+                    g = rays[0, s * R + r]
+                    t, uf = f * g, rays[1, s * R + r] * f
+                    if g != 0.0 and t >= 0.0 and uf >= back and aml + uf <= 0.0 and t < best[r]:
+                        best[r] = t
             for r in range(R):
-                best = 1.0
-                for s in range(S):
-                    t = rays[d, s * R + r]
-                    h = rays[d, sr + s * R + r]
-                    for c in range(d):
-                        p = out[laug0 + li * (d + 1) + c]
-                        t += p * rays[c, s * R + r]
-                        h += p * rays[c, sr + s * R + r]
-                    if t >= 0.0 and abs(h) <= 1.0 and t < best:
-                        best = t
-                obs[li, L1 + 1 + r] = best
+                obs[li, L1 + 1 + r] = best[r]
         else:
             for j in range(od - L1 - 1):
                 obs[li, L1 + 1 + j] = sense_in[li, j]
@@ -282,7 +287,8 @@ def measure_rows(
         ref: the new exogenous row [goal (n d), goal velocity (n d), 1, k], shape (B, 2 n d + 2).
         a2: squared clipped actions (B, n_l p); gprev: goal distances before the step (B, n_l), m.
         circles (B, C, d + 1); walls (B, d + 1, 3 S): [p, 1] -> (across, along - length, -along);
-        rays (B, d + 1, 2 S R): a leader's [p, 1] -> (T, AH); thr (B, Kc + n + 1) thresholds (m).
+        rays (B, 2, S R): per wall and ray G and U (``wall_maps``); thr (B, Kc + n + 1) thresholds (m), or (1, ...)
+        shared by every env.
         pairs (P, 2) agent pairs checked for contact; leaders (n_l,); perm (n,): leaders first.
         pinv (d + 1, n), hfit (n, d + 1): the affine fit [r, 1]^+ and [r, 1].
         box (2, d): world box low and high; fast: per-axis displacement (m) above which an agent is fast.
@@ -298,7 +304,7 @@ def measure_rows(
     od = obs.shape[2]
     C = circles.shape[1]
     S = walls.shape[2] // 3
-    R = rays.shape[2] // (2 * S) if S > 0 else 0
+    R = rays.shape[2] // S if S > 0 else 0
     P = pairs.shape[0]
     kc = P + n * C + n * S
     nd = n * d
@@ -306,7 +312,6 @@ def measure_rows(
     na = a2.shape[1]
     nw = rew.shape[1]
     nf = na + 2 * nl
-    rw = 2 * S * R if mode == 2 else 0
     sqn = np.sqrt(float(n))
     W = MEASURE_BLOCK
     pt = np.empty((nd, W))  # the block's positions, transposed: row i d + c is p[i, c] of each env
@@ -316,11 +321,11 @@ def measure_rows(
     tt = np.empty((nt, W))  # thresholds
     ct = np.empty((C * d, W))  # circle centres
     wt = np.empty(((d + 1) * 3 * S, W))  # wall maps
-    th = np.empty(rw)  # one leader's ray parameters T and AH, per env
     ft = np.empty((nf, W))  # reward features [a2, gprev, goal distances of the leaders]
     coef = np.empty(((d + 1) * d, W))
     lin = np.empty((L1, W))
     acc = np.empty(W)
+    wa, wl, wb = np.empty(W), np.empty(W), np.empty(W)  # across, along, back of one agent and wall
     clear = np.empty(W)
     worst = np.empty(W)
     gmax = np.empty(W)
@@ -329,6 +334,11 @@ def measure_rows(
     fst = np.empty(W, dtype=np.bool_)
     rt = np.empty((nw, W))
     best = np.empty(R)  # one leader's readings, per env
+    shared = thr.shape[0] == 1  # one row of thresholds for every env: transposed once
+    if shared:
+        for j in range(nt):
+            for e in range(W):
+                tt[j, e] = thr[0, j]
     for s0 in range(b0, b1, W):
         m = min(W, b1 - s0)
         for e in range(m):  # the block, transposed: then every loop below runs over envs (SIMD)
@@ -342,8 +352,9 @@ def measure_rows(
                     vt[li * d + c, e] = vel[b, leaders[li], c]
             for j in range(2 * nd + 2):
                 gt[j, e] = ref[b, j]
-            for j in range(nt):
-                tt[j, e] = thr[b, j]
+            if not shared:
+                for j in range(nt):
+                    tt[j, e] = thr[b, j]
             for j in range(C):
                 for c in range(d):
                     ct[j * d + c, e] = circles[b, j, c]
@@ -384,18 +395,24 @@ def measure_rows(
                     v = np.sqrt(acc[e]) - tk[e]
                     cl = clear[e]
                     clear[e] = v if v < cl else cl
-            for s in range(S):  # agent-wall: distance across, and excess along the wall
+            for s in range(S):  # agent-wall: distance across, and excess along the wall (rows of wt, SIMD)
                 tk = tt[P + n * C + i * S + s]
                 o = d * 3 * S
+                w0, w1, w2 = wt[o + s], wt[o + S + s], wt[o + 2 * S + s]
                 for e in range(m):
-                    across = wt[o + s, e]
-                    along = wt[o + S + s, e]
-                    back = wt[o + 2 * S + s, e]
-                    for c in range(d):
-                        pc = pt[i * d + c, e]
-                        across += pc * wt[c * 3 * S + s, e]
-                        along += pc * wt[c * 3 * S + S + s, e]
-                        back += pc * wt[c * 3 * S + 2 * S + s, e]
+                    wa[e] = w0[e]
+                    wl[e] = w1[e]
+                    wb[e] = w2[e]
+                for c in range(d):
+                    pc, y0 = pt[i * d + c], wt[c * 3 * S + s]
+                    y1, y2 = wt[c * 3 * S + S + s], wt[c * 3 * S + 2 * S + s]
+                    for e in range(m):
+                        pe = pc[e]
+                        wa[e] += pe * y0[e]
+                        wl[e] += pe * y1[e]
+                        wb[e] += pe * y2[e]
+                for e in range(m):
+                    across, along, back = wa[e], wl[e], wb[e]
                     ex = along if along > back else back
                     ex = ex if ex > 0.0 else 0.0
                     v = np.sqrt(across * across + ex * ex) - tk[e]
@@ -525,22 +542,24 @@ def measure_rows(
                     v = lo if v < lo else v
                     lj_[e] = hi if v > hi else v
             if mode == 2:  # 2D rays: T / sensor range of the first hit inside a wall, else 1 (per env, SIMD over rays)
-                sr = S * R
+                o = d * 3 * S
                 for e in range(m):
                     b = s0 + e
-                    yd = rays[b, d]
-                    for j in range(rw):
-                        th[j] = yd[j]
-                    for c in range(d):
-                        pc, yc = pt[a * d + c, e], rays[b, c]
-                        for j in range(rw):
-                            th[j] += pc * yc[j]
+                    gs, us = rays[b, 0], rays[b, 1]
                     for r in range(R):
                         best[r] = 1.0
-                    for s in range(S):  # branch-free, SIMD over rays
-                        for r in range(R):
-                            t, h, bt = th[s * R + r], th[sr + s * R + r], best[r]
-                            best[r] = t if (t >= 0.0) & (abs(h) <= 1.0) & (t < bt) else bt
+                    for s in range(S):  # the leader's across, along - length, -along: as the agent-wall loop
+                        across, aml, back = wt[o + s, e], wt[o + S + s, e], wt[o + 2 * S + s, e]
+                        for c in range(d):
+                            pc = pt[a * d + c, e]
+                            across += pc * wt[c * 3 * S + s, e]
+                            aml += pc * wt[c * 3 * S + S + s, e]
+                            back += pc * wt[c * 3 * S + 2 * S + s, e]
+                        f = -across
+                        for r in range(R):  # branch-free: hit inside the wall (along from 0 to length), nearer
+                            g, bt = gs[s * R + r], best[r]
+                            t, uf = f * g, us[s * R + r] * f
+                            best[r] = t if (g != 0.0) & (t >= 0.0) & (uf >= back) & (aml + uf <= 0.0) & (t < bt) else bt
                     for r in range(R):
                         obs[b, li, L1 + 1 + r] = best[r]
             else:
@@ -647,6 +666,62 @@ def step_rows(b0: int, b1: int, linear: tuple[np.ndarray, ...], *measure: Any) -
     ``pos`` on, with the new row ``ref``)."""
     linear_rows(b0, b1, *linear, measure[0], measure[2])
     measure_rows(b0, b1, *measure)
+
+
+@njit(cache=True, nogil=True)
+def episode_rows(
+    dist: np.ndarray,
+    flags: np.ndarray,
+    hit: np.ndarray,
+    ok_in: np.ndarray,
+    re: np.ndarray,
+    streak_prev: np.ndarray,
+    k: np.ndarray,
+    hold: int,
+    end_on_success: bool,
+    max_cycles: int,
+    w_head: np.ndarray,
+    rew: np.ndarray,
+    ends: np.ndarray,
+    err: np.ndarray,
+    clear: np.ndarray,
+    gd: np.ndarray,
+    streak: np.ndarray,
+) -> None:
+    """The end of a batched step, per env, after ``measure_rows`` (and the swept checks): contacts, the success
+    streak, episode ends and rewards; the same operations in the same order as ``Engine._step_batch``'s numpy
+    reference (``Engine._episode_end``), so the same bits.
+
+    Args:
+        dist (B, n_l + 4), flags (B, 2) bool, re (B, 2 n_l): ``measure_rows``' outputs (``dist``'s clearance
+        column lowered by the swept checks, if any); hit (B,) bool: swept wall crossings.
+        ok_in: (B,) bool, the scenario's own success test, or (0,): success is ``dist[:, n_l + 3] < 0``.
+        streak_prev (B,) int64: successes in a row before the step; k (B,) int64: samples after it.
+        hold: successes in a row that are a success; end_on_success: a success ends the episode;
+        max_cycles: samples of an episode; w_head (3,): reward weights of success, collision, formation error.
+    Outputs:
+        rew (B, n_l): rewards; ends (5, B) bool: success, collision, out of bounds, terminated, truncated;
+        err, clear (B,): formation error and clearance (m); gd (B, n_l): leader goal distances (m);
+        streak (B,) int64.
+    """
+    B, nl = dist.shape[0], gd.shape[1]
+    ws, wc, wf = w_head[0], w_head[1], w_head[2]
+    own = ok_in.shape[0] > 0
+    for b in range(B):
+        cl, er = dist[b, nl + 2], dist[b, nl]
+        oob = flags[b, 0]
+        col = (cl < 0.0) | oob | hit[b]
+        ok = (ok_in[b] if own else dist[b, nl + 3] < 0.0) & (not col)
+        st = np.int64(ok) if hold == 1 else (streak_prev[b] + 1) * np.int64(ok)
+        suc = st >= hold
+        term = (col | suc) if end_on_success else col
+        ends[0, b], ends[1, b], ends[2, b] = suc, col, oob
+        ends[3, b], ends[4, b] = term, (k[b] >= max_cycles) & (not term)
+        head = (ws if suc else 0.0) + (wc if col else 0.0) + er * wf
+        for j in range(nl):
+            rew[b, j] = re[b, j] + head
+            gd[b, j] = dist[b, j]
+        err[b], clear[b], streak[b] = er, cl, st
 
 
 #: Fewest env rows a thread of ``run_rows`` gets: below it, handing work to a thread costs more than it saves.
@@ -1031,14 +1106,16 @@ def wall_maps(seg: np.ndarray, dirs: np.ndarray, sensor_range: float) -> tuple[n
         dirs: unit ray directions, shape (R, 2).
         sensor_range: ray length (m).
     Returns:
-        W (B, 3, 3 S): [p, 1] -> [across, along - length, -along] per wall; Rm (B, 3, 2 S R): a leader's [p, 1] ->
-        [T, AH] per wall and ray (T: range along the ray / sensor range; AH: where along the wall it hits, the
-        wall's ends at -1 and 1; a ray parallel to the wall gets T = -1 from the constant alone).
+        W (B, 3, 3 S): [p, 1] -> [across, along - length, -along] per wall; Rm (B, 2, S R): per wall and ray,
+        G = 1 / (u . n) / sensor range and U = (u . t) / (u . n) (u: the ray's direction; n, t: the wall's normal
+        and direction), both 0 for a ray parallel to the wall. A leader at p with across a = n . p - a_n sees
+        the wall's line at T = -a G sensor ranges, at along + (-a) U along the wall (inside it from 0 to its
+        length; see ``measure_rows``).
     """
     B, S = seg.shape[0], seg.shape[1]
     R = dirs.shape[0]
     W = np.zeros((B, 3, 3 * S))
-    Rm = np.empty((B, 3, 2 * S * R))
+    Rm = np.empty((B, 2, S * R))
     for b in range(B):
         for s in range(S):
             a0, a1 = seg[b, s, 0, 0], seg[b, s, 0, 1]
@@ -1051,19 +1128,10 @@ def wall_maps(seg: np.ndarray, dirs: np.ndarray, sensor_range: float) -> tuple[n
             W[b, 0, s], W[b, 1, s], W[b, 2, s] = n0, n1, -a_n
             W[b, 0, S + s], W[b, 1, S + s], W[b, 2, S + s] = t0, t1, -a_t - length
             W[b, 0, 2 * S + s], W[b, 1, 2 * S + s], W[b, 2, 2 * S + s] = -t0, -t1, a_t
-            half = length / 2
             for r in range(R):
                 un = dirs[r, 0] * n0 + dirs[r, 1] * n1
                 ut = dirs[r, 0] * t0 + dirs[r, 1] * t1
-                hit = abs(un) > 1e-9
-                inv = 1.0 / un if hit else 0.0
-                k = s * R + r
-                Rm[b, 0, k] = -n0 * (inv / sensor_range)
-                Rm[b, 1, k] = -n1 * (inv / sensor_range)
-                Rm[b, 2, k] = a_n * inv / sensor_range if hit else -1.0
-                h0 = (t0 - n0 * (ut * inv)) / half
-                h1 = (t1 - n1 * (ut * inv)) / half
-                Rm[b, 0, S * R + k] = h0
-                Rm[b, 1, S * R + k] = h1
-                Rm[b, 2, S * R + k] = -(a0 * h0 + a1 * h1) - 1.0
+                inv = 1.0 / un if abs(un) > 1e-9 else 0.0
+                Rm[b, 0, s * R + r] = inv / sensor_range
+                Rm[b, 1, s * R + r] = ut * inv
     return W, Rm

@@ -620,9 +620,11 @@ class Engine:
                 [sc.formation_tol],
             ]
         )
+        self._thr_row = self._thr0[None].copy()
+        self._thr_row.setflags(write=False)  # like the params arrays: one array type for the kernels
 
     def _episode_geometry(self, params: dict[str, Array]) -> None:
-        """Per-episode geometry into ``params``: ``_thr`` (B, Kc + n + 1) thresholds (m), and for walls
+        """Per-episode geometry into ``params``: with circles, ``_thr`` (B, Kc + n + 1) thresholds (m); for walls
         ``_a``, ``_e`` (B, S, d) their starts and vectors (m) and the maps of :meth:`_wall_maps`: ``_W``
         (B, d + 1, 3 S), ``_R`` (B, d + 1, 2 R S). (The constant parts of Q, circle centres and static goals,
         are added where Q is made: :meth:`_add_offsets`.)"""
@@ -634,21 +636,27 @@ class Engine:
                 f"scenario {self.scenario_name!r} must give {S} segments and {C} circles per episode, "
                 f"got {seg.shape[1]} and {circ.shape[1]}"
             )
-        thr = np.repeat(self._thr0[None], B, axis=0)
-        if C:
+        if C:  # per-episode thresholds only where circles' radii enter them (else :meth:`_thresholds` shares one)
+            thr = np.repeat(self._thr0[None], B, axis=0)
             r0 = self._rows
             thr[:, r0["circles"] : r0["walls"]] += np.repeat(circ[:, None, :, self.d], n, axis=1).reshape(B, n * C)
+            params["_thr"] = thr
         if S:
             params["_W"], params["_R"] = self._wall_maps(seg)
             params["_a"], params["_e"] = seg[:, :, 0], seg[:, :, 1] - seg[:, :, 0]
-        params["_thr"] = thr
+
+    def _thresholds(self, params: dict[str, Array]) -> Array:
+        """The contact and success thresholds (m) of the episodes ``params``: their own ``_thr`` (B, Kc + n + 1)
+        where circles make them differ, else the engine's, shared, as a read-only (1, Kc + n + 1) row."""
+        return params.get("_thr", self._thr_row)
 
     def _wall_maps(self, seg: Array) -> tuple[Array, Array]:
         """The walls' coefficient maps, from their segments (start, end) (B, S, 2, d) (2D), m:
 
         * ``W`` (B, d + 1, 3 S): an agent's [p, 1] -> [across, along - length, -along] per wall;
-        * ``R`` (B, d + 1, 2 S R): a leader's [p, 1] -> [T, AH] per wall and ray (T = range along the ray /
-          sensor range; the ray hits inside the wall iff T >= 0 and |AH| <= 1).
+        * ``R`` (B, 2, S R): G and U per wall and ray (``_kernel.wall_maps``): a leader whose across of wall s
+          is a meets its line along ray r at T = -a G (sensor ranges) and at along + (-a) U along it: a hit iff
+          G != 0 (not parallel), T >= 0 and 0 <= along + (-a) U <= length.
 
         Compiled per episode (``_kernel.wall_maps``, the same operations) when numba is there, else numpy."""
         if _kernel.AVAILABLE:
@@ -664,22 +672,12 @@ class Engine:
         W[:, :d, :S], W[:, d, :S] = nr.transpose(0, 2, 1), -a_n
         W[:, :d, S : 2 * S], W[:, d, S : 2 * S] = t.transpose(0, 2, 1), -a_t - length
         W[:, :d, 2 * S :], W[:, d, 2 * S :] = -t.transpose(0, 2, 1), a_t
-        un = np.einsum("rc,bsc->brs", self._dirs, nr)  # (B, R, S)
-        ut = np.einsum("rc,bsc->brs", self._dirs, t)
+        un = np.einsum("rc,bsc->bsr", self._dirs, nr)  # (B, S, R)
+        ut = np.einsum("rc,bsc->bsr", self._dirs, t)
         ok = np.abs(un) > 1e-9
         inv = np.where(ok, 1.0 / np.where(ok, un, 1.0), 0.0)
-        coef_t = -nr[:, None] * (inv / self.sensor_range)[..., None]  # (B, R, S, d)
-        const_t = np.where(ok, a_n[:, None] * inv / self.sensor_range, -1.0)
-        half = (length / 2)[:, None, :]
-        coef_h = (t[:, None] - nr[:, None] * (ut * inv)[..., None]) / half[..., None]
-        const_h = -np.sum(a[:, None] * coef_h, -1) - 1.0
-        R = self.n_rays
-        Rm = np.zeros((B, d + 1, 2, S, R))  # feature (part, s, r)
-        Rm[:, :d, 0] = coef_t.transpose(0, 3, 2, 1)
-        Rm[:, d, 0] = const_t.transpose(0, 2, 1)
-        Rm[:, :d, 1] = coef_h.transpose(0, 3, 2, 1)
-        Rm[:, d, 1] = const_h.transpose(0, 2, 1)
-        return W, Rm.reshape(B, d + 1, 2 * S * R)
+        Rm = np.stack([inv / self.sensor_range, ut * inv], axis=1)  # (B, 2, S, R)
+        return W, Rm.reshape(B, 2, S * self.n_rays)
 
     def _build_bounds(self) -> None:
         d, nl, n = self.d, self.n_l, self.n
@@ -868,10 +866,13 @@ class Engine:
         pos_l = laug[..., :-1]
         if self.d == 2:
             R, S = self.n_rays, self.n_seg
-            if S:  # ranges / sensor range of the rays that hit a wall inside it, else 1
-                rf = laug @ params["_R"]  # (B, n_l, 2 S R): T then AH
-                t, h = rf[..., : S * R], rf[..., S * R :]
-                hit = np.where((t >= 0.0) & (np.abs(h) <= 1.0), t, 1.0).reshape(B, nl, S, R)
+            if S:  # ranges / sensor range of the rays that hit a wall inside it, else 1 (see _kernel.wall_maps)
+                wf = laug @ params["_W"]  # (B, n_l, 3 S): across, along - length, -along per wall
+                aml, back = wf[..., S : 2 * S, None], wf[..., 2 * S :, None]
+                f = -wf[..., :S, None]
+                g = params["_R"][:, 0].reshape(B, 1, S, R)
+                t, uf = f * g, params["_R"][:, 1].reshape(B, 1, S, R) * f  # (B, n_l, S, R)
+                hit = np.where((g != 0.0) & (t >= 0.0) & (uf >= back) & (aml + uf <= 0.0), t, 1.0)
                 ranges = np.minimum(hit[:, :, 0], 1.0)
                 for s_ in range(1, S):
                     np.minimum(ranges, hit[:, :, s_], out=ranges)
@@ -999,7 +1000,7 @@ class Engine:
         paug = out[:, cols["paug"]].reshape(B, self.n, self.d + 1)
         geo = self._features(out[:, cols["pos1"]], paug, laug, params, ref)
         nv = self._norms(geo)
-        v = nv - params["_thr"]
+        v = nv - self._thresholds(params)
         clear = v[:, :kc].min(axis=1)
         collision = clear < 0.0
         pos = out[:, cols["pos"]].reshape(B, self.n, self.d)
@@ -1105,6 +1106,8 @@ class Engine:
             self._bmode = _kernel.SENSE_GIVEN
         self._sense_cache: dict[int, Array] = {}
         self._ks = ks
+        self._own_ok = np.zeros(0, dtype=bool)  # episode_rows: no scenario success test of its own
+        self._w_head_arr = np.array(self._w_head)
         self._no_walls = np.zeros((1, d + 1, 0))
         self._no_walls.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
 
@@ -1144,7 +1147,7 @@ class Engine:
             params["circles"],
             walls,
             params["_R"] if self._bmode == _kernel.SENSE_WALLS else walls,
-            params["_thr"],
+            self._thresholds(params),
             self._pairs,
             self.leaders,
             self._perm,
@@ -1230,22 +1233,20 @@ class Engine:
             _kernel.run_rows(
                 _kernel.step_rows, B, T, (*lin, x_o, mem_o), *meas, *self._geometry_args(pos, params), *out
             )
-        err, clear = dist[:, nl].copy(), dist[:, nl + 2].copy()  # contiguous: vec envs copy state rows as bytes
-        collision = clear < 0.0
-        if flags.any():  # left the world box, or an agent was fast: swept checks
-            oob = flags[:, 0].copy()
-            collision |= oob
-            if flags[:, 1].any():
-                self._swept(state.pos, pos, params, clear, collision, flags[:, 1])
-        else:
-            oob = self._false(B)
-        if self._fused_success:
-            ok = (dist[:, nl + 3] < 0.0) > collision
-        else:
-            ok = sc.is_success(dist[:, nl + 1], err) > collision
-        streak, success, terminated, truncated = self._episode_end(state, ok, collision, k)
-        ws, wc, wf = self._w_head
-        rew = re[:, :nl] + (success * ws + collision * wc + err * wf)[:, None]
+        hit = self._false(B)
+        if flags[:, 1].any():  # an agent was fast: swept checks (lower the clearance in dist, mark crossings)
+            hit = np.zeros(B, dtype=bool)
+            self._swept(state.pos, pos, params, dist[:, nl + 2], hit, flags[:, 1])
+            hit.setflags(write=False)  # one array type for the kernel
+        ok = self._own_ok if self._fused_success else sc.is_success(dist[:, nl + 1], dist[:, nl])
+        rew, gd = np.empty((B, nl)), np.empty((B, nl))
+        ends, ec, streak = np.empty((5, B), dtype=np.bool_), np.empty((2, B)), np.empty(B, dtype=np.int64)
+        consts = (sc.hold_steps, sc.terminate_on_success, self._max_cycles, self._w_head_arr)
+        _kernel.episode_rows(
+            dist, flags, hit, np.asarray(ok, dtype=np.bool_), re, state.streak, k, *consts, rew, ends, *ec, gd, streak
+        )
+        success, collision, oob, terminated, truncated = ends
+        err, clear = ec
         new = EngineState(
             x_o.reshape(B, n, self.q),
             pos,
@@ -1253,7 +1254,7 @@ class Engine:
             mem_o.reshape(B, self.n_f, self.p) if self.mem_dim else None,
             k,
             ref,
-            dist[:, :nl].copy(),
+            gd,
             err,
             streak,
             params,
@@ -1296,8 +1297,9 @@ class Engine:
             "sense_mode": self._bmode,
         }
         self._layout1 = np.array([layout[k] for k in _kernel.LAYOUT], dtype=np.int64)
-        self._no_rays = np.zeros((d + 1, 0))
-        self._no_rays.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
+        self._no_rays = (np.zeros((d + 1, 0)), np.zeros((2, 0)))  # no walls: (wall map, ray map)
+        for arr in self._no_rays:
+            arr.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
         self._no_mem = np.zeros(0)
 
     def _fold_episode(self, params: dict[str, Array], ref: Array) -> None:
@@ -1350,7 +1352,7 @@ class Engine:
         if flat.size != self._w_tail.shape[0] - 2 * self.n_l:
             self.check_actions(a if a.ndim == 3 else a[None], 1)  # raises on the shape
         cols, nl, kc, n, d = self._cols, self.n_l, self._kc, self.n, self.d
-        rays = params["_R"][0] if self._bmode == _kernel.SENSE_WALLS else self._no_rays
+        walls, rays = (params["_W"][0], params["_R"][0]) if self._bmode == _kernel.SENSE_WALLS else self._no_rays
         out1, obs, nv, re, sc3 = _kernel.step1(
             state.x.reshape(-1),
             flat,
@@ -1358,7 +1360,8 @@ class Engine:
             state.ref[0],
             self._M,
             params["_M1"][0],
-            params["_thr"][0],
+            self._thresholds(params)[0],
+            walls,
             rays,
             self._sense_c,
             state.goal_dist[0],

@@ -349,20 +349,31 @@ class FormationVecEnv(VecEnv):
         self._next_episodes(envs, obs)
         return obs, rews, dones, envs, final
 
-    def _done_infos(self, envs: NDArray[np.int64]) -> list[dict[str, Any]]:
-        """The info of each slot of the finished envs ``envs`` (env by env): ``last_info``'s scalars and
-        ``TimeLimit.truncated``; one dict per slot."""
-        info, term, trunc = self.last_info, self.last_terminated, self.last_truncated
-        cut = (trunc[envs] & ~term[envs]).tolist()
-        values = zip(*[info[key][envs].tolist() for key in _DONE_INFO], cut, strict=True)
-        return [dict(zip(_INFO_KEYS, v, strict=True)) for v in values for _ in range(self._per_env)]
+    def _done_infos(self, envs: NDArray[np.int64], truncated_key: bool = True) -> list[dict[str, Any]]:
+        """The info of each finished env of ``envs``: ``last_info``'s scalars and (``truncated_key``)
+        ``TimeLimit.truncated``; one dict per env, to copy for each of its slots."""
+        info = self.last_info
+        cols = [info[key][envs].tolist() for key in _DONE_INFO]
+        if not truncated_key:
+            return [dict(zip(_DONE_INFO, v, strict=True)) for v in zip(*cols, strict=True)]
+        term, trunc = self.last_terminated, self.last_truncated
+        cols.append((trunc[envs] & ~term[envs]).tolist())
+        return [dict(zip(_INFO_KEYS, v, strict=True)) for v in zip(*cols, strict=True)]
+
+    def _slot_infos(
+        self, envs: NDArray[np.int64], final: NDArray[np.float32], truncated_key: bool = True
+    ) -> tuple[list[int], list[dict[str, Any]], list[NDArray[np.float32]]]:
+        """(slot, its own info dict, its last observation) of every slot of the finished envs ``envs``."""
+        k = self._per_env
+        infos = [inf.copy() for inf in self._done_infos(envs, truncated_key) for _ in range(k)]
+        return self._slots(envs).tolist(), infos, list(final)
 
     def step_wait(self) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], list[dict[str, Any]]]:
         """Step all B envs, auto-reset the finished ones; (obs, rewards, dones, infos) per slot."""
         obs, rews, dones, envs, final = self._step_slots()
         infos: list[dict[str, Any]] = pickle.loads(self._empty_infos)  # fresh empty dicts, made in C
         if envs.size:
-            for s, inf, fin in zip(self._slots(envs).tolist(), self._done_infos(envs), list(final), strict=True):
+            for s, inf, fin in zip(*self._slot_infos(envs, final), strict=True):
                 inf["terminal_observation"] = fin
                 infos[s] = inf
         return obs, rews, dones, infos
@@ -460,11 +471,9 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
         trunc = np.repeat(v.last_truncated, k)
         info: dict[str, Any] = {}
         if envs.size:
-            slots = v._slots(envs)
             final_obs = np.full(self.num_envs, None, dtype=object)
             final_info = np.full(self.num_envs, None, dtype=object)
-            for s, inf, fin in zip(slots.tolist(), v._done_infos(envs), list(final), strict=True):
-                del inf["TimeLimit.truncated"]
+            for s, inf, fin in zip(*v._slot_infos(envs, final, truncated_key=False), strict=True):
                 final_obs[s], final_info[s] = fin, inf
             info = {"final_obs": final_obs, "_final_obs": dones.copy(), "final_info": final_info, "_final_info": dones}
         return obs, rews, term, trunc, info

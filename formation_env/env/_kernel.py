@@ -279,7 +279,7 @@ def measure_rows(
     directly from positions instead of through the folded feature matrices. The envs go ``MEASURE_BLOCK``
     at a time, transposed, so that each loop runs over a block of envs (SIMD, branch-free minima); each
     env's arithmetic keeps one order, so its result does not depend on the block or the rows' split.
-    The rays go env by env, SIMD over the rays (their maps are too large to transpose cheaply).
+    The rays go env by env, SIMD over the rays, from the leaders' across / along values of the agent-wall loop.
 
     Args:
         b0, b1: the env rows to compute.
@@ -325,7 +325,11 @@ def measure_rows(
     coef = np.empty(((d + 1) * d, W))
     lin = np.empty((L1, W))
     acc = np.empty(W)
-    wa, wl, wb = np.empty(W), np.empty(W), np.empty(W)  # across, along, back of one agent and wall
+    wa, wl, wb = np.empty(W), np.empty(W), np.empty(W)  # across, along - length, -along of one agent and wall
+    lw = np.empty((nl * S * 3, W))  # and of each leader and wall, for the rays
+    lead = np.full(n, -1)  # an agent's leader index, or -1
+    for li in range(nl):
+        lead[leaders[li]] = li
     clear = np.empty(W)
     worst = np.empty(W)
     gmax = np.empty(W)
@@ -411,6 +415,9 @@ def measure_rows(
                         wa[e] += pe * y0[e]
                         wl[e] += pe * y1[e]
                         wb[e] += pe * y2[e]
+                if mode == 2 and lead[i] >= 0:
+                    r0 = (lead[i] * S + s) * 3
+                    lw[r0, :m], lw[r0 + 1, :m], lw[r0 + 2, :m] = wa[:m], wl[:m], wb[:m]
                 for e in range(m):
                     across, along, back = wa[e], wl[e], wb[e]
                     ex = along if along > back else back
@@ -542,20 +549,14 @@ def measure_rows(
                     v = lo if v < lo else v
                     lj_[e] = hi if v > hi else v
             if mode == 2:  # 2D rays: T / sensor range of the first hit inside a wall, else 1 (per env, SIMD over rays)
-                o = d * 3 * S
                 for e in range(m):
                     b = s0 + e
                     gs, us = rays[b, 0], rays[b, 1]
                     for r in range(R):
                         best[r] = 1.0
-                    for s in range(S):  # the leader's across, along - length, -along: as the agent-wall loop
-                        across, aml, back = wt[o + s, e], wt[o + S + s, e], wt[o + 2 * S + s, e]
-                        for c in range(d):
-                            pc = pt[a * d + c, e]
-                            across += pc * wt[c * 3 * S + s, e]
-                            aml += pc * wt[c * 3 * S + S + s, e]
-                            back += pc * wt[c * 3 * S + 2 * S + s, e]
-                        f = -across
+                    for s in range(S):  # the leader's across, along - length, -along (the agent-wall loop's)
+                        r0 = (li * S + s) * 3
+                        f, aml, back = -lw[r0, e], lw[r0 + 1, e], lw[r0 + 2, e]
                         for r in range(R):  # branch-free: hit inside the wall (along from 0 to length), nearer
                             g, bt = gs[s * R + r], best[r]
                             t, uf = f * g, us[s * R + r] * f
@@ -680,7 +681,9 @@ def episode_rows(
     hold: int,
     end_on_success: bool,
     max_cycles: int,
-    w_head: np.ndarray,
+    ws: float,
+    wc: float,
+    wf: float,
     rew: np.ndarray,
     ends: np.ndarray,
     err: np.ndarray,
@@ -698,14 +701,13 @@ def episode_rows(
         ok_in: (B,) bool, the scenario's own success test, or (0,): success is ``dist[:, n_l + 3] < 0``.
         streak_prev (B,) int64: successes in a row before the step; k (B,) int64: samples after it.
         hold: successes in a row that are a success; end_on_success: a success ends the episode;
-        max_cycles: samples of an episode; w_head (3,): reward weights of success, collision, formation error.
+        max_cycles: samples of an episode; ws, wc, wf: reward weights of success, collision, formation error.
     Outputs:
         rew (B, n_l): rewards; ends (5, B) bool: success, collision, out of bounds, terminated, truncated;
         err, clear (B,): formation error and clearance (m); gd (B, n_l): leader goal distances (m);
         streak (B,) int64.
     """
     B, nl = dist.shape[0], gd.shape[1]
-    ws, wc, wf = w_head[0], w_head[1], w_head[2]
     own = ok_in.shape[0] > 0
     for b in range(B):
         cl, er = dist[b, nl + 2], dist[b, nl]

@@ -626,7 +626,7 @@ class Engine:
     def _episode_geometry(self, params: dict[str, Array]) -> None:
         """Per-episode geometry into ``params``: with circles, ``_thr`` (B, Kc + n + 1) thresholds (m); for walls
         ``_a``, ``_e`` (B, S, d) their starts and vectors (m) and the maps of :meth:`_wall_maps`: ``_W``
-        (B, d + 1, 3 S), ``_R`` (B, d + 1, 2 R S). (The constant parts of Q, circle centres and static goals,
+        (B, d + 1, 3 S), ``_R`` (B, 2, S R). (The constant parts of Q, circle centres and static goals,
         are added where Q is made: :meth:`_add_offsets`.)"""
         n = self.n
         seg, circ = params["segments"], params["circles"]
@@ -1106,8 +1106,7 @@ class Engine:
             self._bmode = _kernel.SENSE_GIVEN
         self._sense_cache: dict[int, Array] = {}
         self._ks = ks
-        self._own_ok = np.zeros(0, dtype=bool)  # episode_rows: no scenario success test of its own
-        self._w_head_arr = np.array(self._w_head)
+        self._no_success_test = np.zeros(0, dtype=bool)  # episode_rows: the default success test
         self._no_walls = np.zeros((1, d + 1, 0))
         self._no_walls.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
 
@@ -1238,10 +1237,10 @@ class Engine:
             hit = np.zeros(B, dtype=bool)
             self._swept(state.pos, pos, params, dist[:, nl + 2], hit, flags[:, 1])
             hit.setflags(write=False)  # one array type for the kernel
-        ok = self._own_ok if self._fused_success else sc.is_success(dist[:, nl + 1], dist[:, nl])
+        ok = self._no_success_test if self._fused_success else sc.is_success(dist[:, nl + 1], dist[:, nl])
         rew, gd = np.empty((B, nl)), np.empty((B, nl))
         ends, ec, streak = np.empty((5, B), dtype=np.bool_), np.empty((2, B)), np.empty(B, dtype=np.int64)
-        consts = (sc.hold_steps, sc.terminate_on_success, self._max_cycles, self._w_head_arr)
+        consts = (sc.hold_steps, sc.terminate_on_success, self._max_cycles, *self._w_head)
         _kernel.episode_rows(
             dist, flags, hit, np.asarray(ok, dtype=np.bool_), re, state.streak, k, *consts, rew, ends, *ec, gd, streak
         )

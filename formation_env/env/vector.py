@@ -354,18 +354,19 @@ class FormationVecEnv(VecEnv):
         ``TimeLimit.truncated``; one dict per env, to copy for each of its slots."""
         info = self.last_info
         cols = [info[key][envs].tolist() for key in _DONE_INFO]
-        if not truncated_key:
-            return [dict(zip(_DONE_INFO, v, strict=True)) for v in zip(*cols, strict=True)]
-        term, trunc = self.last_terminated, self.last_truncated
-        cols.append((trunc[envs] & ~term[envs]).tolist())
-        return [dict(zip(_INFO_KEYS, v, strict=True)) for v in zip(*cols, strict=True)]
+        keys = _DONE_INFO
+        if truncated_key:
+            term, trunc = self.last_terminated, self.last_truncated
+            cols.append((trunc[envs] & ~term[envs]).tolist())
+            keys = _INFO_KEYS
+        return [dict(zip(keys, v, strict=True)) for v in zip(*cols, strict=True)]
 
     def _slot_infos(
         self, envs: NDArray[np.int64], final: NDArray[np.float32], truncated_key: bool = True
     ) -> tuple[list[int], list[dict[str, Any]], list[NDArray[np.float32]]]:
         """(slot, its own info dict, its last observation) of every slot of the finished envs ``envs``."""
         k = self._per_env
-        infos = [inf.copy() for inf in self._done_infos(envs, truncated_key) for _ in range(k)]
+        infos = [inf if j == 0 else inf.copy() for inf in self._done_infos(envs, truncated_key) for j in range(k)]
         return self._slots(envs).tolist(), infos, list(final)
 
     def step_wait(self) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], list[dict[str, Any]]]:

@@ -28,6 +28,8 @@ configuration r; every pose array is batched: Theta (B, d, d), b (B, d).
 from __future__ import annotations
 
 import functools
+import itertools
+import math
 from collections.abc import Callable, Sequence
 from typing import Any, ClassVar, NamedTuple
 
@@ -39,6 +41,18 @@ from formation_env.core.framework import Framework
 from formation_env.core.validation import check_kwargs_consumed
 
 from .. import _kernel
+
+
+def _root(u: Array, d: int) -> Array:
+    """u^(1/d) elementwise, with the bits of the compiled redraws (``_kernel.settle_starts``) on every machine:
+    ``np.sqrt`` for d = 2 (correctly rounded everywhere), else C's ``pow`` (``math.pow``) value by value, since
+    numpy's own power may run a SIMD kernel (AVX-512) that differs from ``pow`` in the last bit."""
+    if d == 2:
+        return np.sqrt(u)
+    if d == 1:
+        return np.array(u, dtype=np.float64)
+    e = 1.0 / d
+    return np.fromiter(map(math.pow, u.ravel(), itertools.repeat(e)), np.float64, u.size).reshape(u.shape)
 
 __all__ = [
     "NAMED_FRAMEWORKS",
@@ -346,7 +360,7 @@ class Scenario:
         Compiled per episode (``_kernel.noisy_starts``, the same operations) up to ``ALL_PAIRS_GAP_UP_TO``
         agents when numba is there; numpy otherwise, and a k-d tree for larger swarms."""
         dirs = noise["_dirs"]
-        rad = follower_noise * noise["_u"] ** (1.0 / self.d)
+        rad = follower_noise * _root(noise["_u"], self.d)
         gap3 = 3.0 * self.agent_radius
         if _kernel.AVAILABLE and self.fw.n <= ALL_PAIRS_GAP_UP_TO:
             return _kernel.noisy_starts(

@@ -42,18 +42,6 @@ from formation_env.core.validation import check_kwargs_consumed
 
 from .. import _kernel
 
-
-def _root(u: Array, d: int) -> Array:
-    """u^(1/d) elementwise, with the bits of the compiled redraws (``_kernel.settle_starts``) on every machine:
-    ``np.sqrt`` for d = 2 (correctly rounded everywhere), else C's ``pow`` (``math.pow``) value by value, since
-    numpy's own power may run a SIMD kernel (AVX-512) that differs from ``pow`` in the last bit."""
-    if d == 2:
-        return np.sqrt(u)
-    if d == 1:
-        return np.array(u, dtype=np.float64)
-    e = 1.0 / d
-    return np.fromiter(map(math.pow, u.ravel(), itertools.repeat(e)), np.float64, u.size).reshape(u.shape)
-
 __all__ = [
     "NAMED_FRAMEWORKS",
     "Draw",
@@ -68,6 +56,19 @@ __all__ = [
 ]
 
 Array = NDArray[np.float64]
+
+
+def _root(u: Array, d: int) -> Array:
+    """u^(1/d) elementwise, with the bits of the compiled redraws (``_kernel.settle_starts``) on every machine:
+    ``np.sqrt`` for d = 2 (correctly rounded everywhere), else C's ``pow`` (``math.pow``) value by value, since
+    numpy's own power may run a SIMD kernel (AVX-512) that differs from ``pow`` in the last bit."""
+    if d == 2:
+        return np.sqrt(u)
+    if d == 1:
+        return np.array(u, dtype=np.float64)
+    e = 1.0 / d
+    return np.fromiter(map(math.pow, u.ravel(), itertools.repeat(e)), np.float64, u.size).reshape(u.shape)
+
 
 #: Weights of the engine's reward terms (see ``FormationEnv``'s Rewards section).
 DEFAULT_WEIGHTS: dict[str, float] = {

@@ -38,6 +38,7 @@ import contextlib
 import gc
 import importlib.util
 import json
+import math
 import os
 import statistics
 import subprocess
@@ -60,24 +61,37 @@ def _have(mod: str) -> bool:
 
 
 def _rates(
-    fns: dict[str, Callable[[], None]], items: dict[str, float], calls: int, repeat: int, warmup: bool = True
+    fns: dict[str, Callable[[], None]],
+    items: dict[str, float],
+    calls: int,
+    repeat: int,
+    warmup: bool = True,
+    turn_s: float = 0.0,
 ) -> dict[str, list[float]]:
-    """Items/s of each fn per repeat (``calls`` calls a repeat), the fns taking turns repeat by repeat.
+    """Items/s of each fn per repeat (a turn of at least ``calls`` calls a repeat), the fns taking turns repeat by
+    repeat.
 
-    The order alternates (A B, B A, ...) so that a drift in machine load hits both alike.
+    The order alternates (A B, B A, ...) so that a drift in machine load hits both alike. With ``turn_s`` > 0, a
+    fn's turn has as many calls as fill about ``turn_s`` seconds (timed on three warm-up calls), so that the cost
+    of a switch (caches refilled, the other library's OpenMP threads still spinning) weighs alike on every fn.
     """
     out: dict[str, list[float]] = {k: [] for k in fns}
+    turns = dict.fromkeys(fns, calls)
     if warmup:
-        for fn in fns.values():
-            fn()
+        for name, fn in fns.items():
+            t0 = time.perf_counter()
+            for _ in range(3 if turn_s > 0 else 1):
+                fn()
+            if turn_s > 0:
+                turns[name] = max(calls, math.ceil(turn_s * 3 / (time.perf_counter() - t0)))
     names = list(fns)
     for rep in range(repeat):
         for name in names if rep % 2 == 0 else names[::-1]:
-            fn = fns[name]
+            fn, n = fns[name], turns[name]
             t0 = time.perf_counter()
-            for _ in range(calls):
+            for _ in range(n):
                 fn()
-            out[name].append(items[name] * calls / (time.perf_counter() - t0))
+            out[name].append(items[name] * n / (time.perf_counter() - t0))
     return out
 
 
@@ -311,7 +325,11 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
         rows.append(
             _skip("b", "VMAS simple_spread / navigation", "vmas not installed (pip install formation-env[bench])")
         )
-    rates = _rates(fns, dict.fromkeys(fns, float(B)), 3 if quick else 10, 3 if quick else 7)
+    # turns of ~50 ms (at least 10 calls): ours steps ~1 ms, VMAS's 3-agent simple_spread ~2 ms, and each one's
+    # first call after a switch costs 1.5x (measured, benchmarks.vec_profile --switch)
+    rates = _rates(
+        fns, dict.fromkeys(fns, float(B)), 3 if quick else 10, 3 if quick else 7, turn_s=0.02 if quick else 0.05
+    )
     for key, (n_steps, n_resets) in resets.items():
         labels[key] += f", auto-reset: {n_resets / max(n_steps, 1):.1f} envs reset a step)"
     peers = {k: v for k, v in rates.items() if k.startswith("vmas")}

@@ -1,10 +1,15 @@
-"""Where a ``FormationVecEnv`` step's time goes: ``python -m benchmarks.vec_profile [scenario ...]``.
+"""Where a ``FormationVecEnv`` step's time goes: ``python -m benchmarks.vec_profile [--switch] [scenario ...]``.
 
 A profile, not a comparison: B = 1024 envs of the benchmark's 10-agent framework (section b of
 BENCHMARKS.md), random actions in [-0.3, 0.3], timed in the steady state of auto-resets. It prints, per
 step (ms), the whole SB3 ``step`` and its parts: the engine's batched step, the auto-resets
 (``_next_episodes``: drawing ahead and taking the next episodes' rows), the finished slots' infos
 (``_slot_infos``) and the per-slot empty info dicts (unpickled, timed alone on the same list).
+
+``--switch`` (needs vmas) times instead each call after a switch between ours and VMAS's 3-agent
+simple_spread (B = 1024 both), turn by turn as the benchmark's interleaved comparisons take turns: the
+first calls after a switch are slower for both (caches, the other library's OpenMP threads), which is why
+section (b) of the benchmark gives each a turn of about the same wall time.
 """
 
 from __future__ import annotations
@@ -66,7 +71,43 @@ def profile(scenario: str, B: int = 1024, steps: int = 400) -> dict[str, float]:
     }
 
 
+def switch_cost(scenario: str, B: int = 1024, turns: int = 40, calls: int = 30) -> dict[str, list[float]]:
+    """Median milliseconds of the j-th call of a turn (j = 0 .. calls - 1), ours and VMAS's alternating."""
+    import torch
+    import vmas
+
+    from formation_env.env.vector import FormationVecEnv
+
+    from .env_bench import _vmas_step
+
+    v = FormationVecEnv(scenario, num_envs=B, mode="shared", seed=0, framework=_ten_agent_framework())
+    v.reset()
+    rng = np.random.default_rng(0)
+    acts = [rng.uniform(-0.3, 0.3, (v.num_envs, v.p)).astype(np.float32) for _ in range(8)]
+    for i in range(150):
+        v.step(acts[i & 7])
+    env3 = vmas.make_env("simple_spread", num_envs=B, device="cpu", continuous_actions=True, seed=0)
+    env3.reset()
+    vstep = _vmas_step(
+        env3, [[env3.get_random_action(a) for a in env3.agents] for _ in range(8)], torch.get_num_threads()
+    )
+    fns = {"ours": lambda j: v.step(acts[j & 7]), "vmas": lambda j: vstep()}
+    per = {k: np.zeros((turns, calls)) for k in fns}
+    for t in range(turns):
+        for name, fn in fns.items():
+            for j in range(calls):
+                t0 = time.perf_counter()
+                fn(j)
+                per[name][t, j] = time.perf_counter() - t0
+    return {k: (np.median(a, axis=0) * 1e3).tolist() for k, a in per.items()}
+
+
 def main(argv: list[str]) -> int:
+    if argv[:1] == ["--switch"]:
+        for scenario in argv[1:] or ["narrow_passage"]:
+            for name, ms in switch_cost(scenario).items():
+                print(f"{scenario}: {name}, ms of the j-th call after a switch: " + " ".join(f"{x:.2f}" for x in ms))
+        return 0
     for scenario in argv or ["narrow_passage", "hold"]:
         parts = profile(scenario)
         print(f"{scenario} (B=1024, n=10, ms per step): " + ", ".join(f"{k} {v:.3f}" for k, v in parts.items()))

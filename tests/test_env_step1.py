@@ -207,13 +207,15 @@ def test_linear_rows_has_the_bits_of_the_dense_product(law):
     a = rng.uniform(-1, 1, (B, eng.n_l * eng.p))
     mem = rng.normal(size=(B, eng.mem_dim))
     ref = rng.normal(size=(B, 2 * eng.n * eng.d + 2))
+    k = rng.integers(0, 400, B)
     outs = [
         np.zeros((B, eng.n * eng.q)),
         np.zeros((B, eng.mem_dim)),
         np.zeros((B, eng.n, eng.d)),
         np.zeros((B, eng.n, eng.d)),
     ]
-    _kernel.linear_rows(3, 197, x, a, mem, ref, *eng._Mc_csc, eng._take, *outs)
+    ref_o = np.zeros_like(ref)
+    _kernel.linear_rows(3, 197, x, a, mem, ref, k, *eng._Mc_csc, eng._take, *outs[:2], ref_o, *outs[2:])
     z = np.hstack([x, a, mem, ref])[:, : eng._Mc.shape[0]]
     y = np.zeros((B, eng._Mc.shape[1]))
     for i in range(z.shape[1]):  # each column summed from zero in z's order, as a dense loop does
@@ -222,6 +224,8 @@ def test_linear_rows_has_the_bits_of_the_dense_product(law):
     got = np.hstack([o.reshape(B, -1) for o in outs])
     assert np.array_equal(got[3:197], want[3:197])
     assert not got[:3].any() and not got[197:].any()
+    assert np.array_equal(ref_o[3:197, :-1], ref[3:197, :-1]) and np.array_equal(ref_o[3:197, -1], k[3:197])
+    assert not ref_o[:3].any() and not ref_o[197:].any()
     assert np.count_nonzero(eng._Mc) == eng._Mc_csc[2].size < eng._Mc.size / 2  # most of Mc is zero: skipped
 
 

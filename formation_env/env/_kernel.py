@@ -259,7 +259,7 @@ def measure_rows(
     prev: np.ndarray,
     vel: np.ndarray,
     ref: np.ndarray,
-    a2: np.ndarray,
+    act: np.ndarray,
     gprev: np.ndarray,
     circles: np.ndarray,
     walls: np.ndarray,
@@ -297,7 +297,8 @@ def measure_rows(
         b0, b1: the env rows to compute.
         pos, prev, vel: new positions, previous positions, new velocities, shape (B, n, d) (m, m/s).
         ref: the new exogenous row [goal (n d), goal velocity (n d), 1, k], shape (B, 2 n d + 2).
-        a2: squared clipped actions (B, n_l p); gprev: goal distances before the step (B, n_l), m.
+        act: the actions (B, n_l p), clipped to [-1, 1] and squared here; gprev: goal distances before the
+        step (B, n_l), m.
         circles (B, C, d + 1); walls (B, d + 1, 3 S): [p, 1] -> (across, along - length, -along);
         rays (B, 2, S R): per wall and ray G and U (``wall_maps``); thr (B, Kc + n + 1) thresholds (m), or (1, ...)
         shared by every env.
@@ -322,7 +323,7 @@ def measure_rows(
     nd = n * d
     tk2 = 2 * nd + 1  # the column of k in ref
     nt = thr.shape[1]
-    na = a2.shape[1]
+    na = act.shape[1]
     nw = rew.shape[1]
     nf = na + 2 * nl
     sqn = np.sqrt(float(n))
@@ -396,8 +397,14 @@ def measure_rows(
         for r in range(d + 1):
             for j in range(3 * S):
                 _rows_t(walls[:, r, j], s0, m, wt[r * 3 * S + j])
-        for j in range(na):
-            _rows_t(a2[:, j], s0, m, ft[j])
+        for j in range(na):  # the squared clipped actions
+            fj = ft[j]
+            _rows_t(act[:, j], s0, m, fj)
+            for e in range(W):
+                v = fj[e]
+                v = -1.0 if v < -1.0 else v
+                v = 1.0 if v > 1.0 else v
+                fj[e] = v * v
         for j in range(nl):
             _rows_t(gprev[:, j], s0, m, ft[na + j])
         for e in range(m):
@@ -653,12 +660,14 @@ def linear_rows(
     a: np.ndarray,
     mem: np.ndarray,
     ref: np.ndarray,
+    k: np.ndarray,
     ptr: np.ndarray,
     row_of: np.ndarray,
     val: np.ndarray,
     take: np.ndarray,
     x_o: np.ndarray,
     mem_o: np.ndarray,
+    ref_o: np.ndarray,
     pos_o: np.ndarray,
     vel_o: np.ndarray,
 ) -> None:
@@ -675,11 +684,13 @@ def linear_rows(
     terms left out are exact zeros, so for finite z the result has the same bits as that dense product.
 
     Args:
-        x (B, n q) states, a (B, n_l p) clipped actions, mem (B, n_f p) law memory (width 0: none),
-        ref (B, 2 n d + 2) exogenous row, used only when Mc has rows for it (more than n q + n_l p + n_f p).
+        x (B, n q) states, a (B, n_l p) actions (clipped to [-1, 1] here), mem (B, n_f p) law memory (width 0:
+        none), ref (B, 2 n d + 2) exogenous row, used in z only when Mc has rows for it (more than n q + n_l p +
+        n_f p); k (B,) int64: the samples after the step.
         ptr (columns of Mc + 1,) int64, row_of (nnz,) int64, val (nnz,): Mc in CSC form;
         take (n q + n_f p + 2 n d,) int64: the distinct column of each output.
-    Outputs (rows b0..b1-1): x_o (B, n q), mem_o (B, n_f p), pos_o and vel_o (B, n, d) (m, m/s).
+    Outputs (rows b0..b1-1): x_o (B, n q), mem_o (B, n_f p), pos_o and vel_o (B, n, d) (m, m/s); ref_o: the new
+    exogenous row of a fixed goal, ref with k in its last column (B, 2 n d + 2), or width 0: not written.
     """
     nx, na, nm = x.shape[1], a.shape[1], mem.shape[1]
     n, d = pos_o.shape[1], pos_o.shape[2]
@@ -696,8 +707,13 @@ def linear_rows(
         m = min(W, b1 - s)
         for i in range(nx):  # z of the block, transposed (column by column: vectorised for a full block)
             _cols_t(x, i, s, m, zt[i])
-        for i in range(na):
-            _cols_t(a, i, s, m, zt[nx + i])
+        for i in range(na):  # the actions, clipped to [-1, 1]
+            zi = zt[nx + i]
+            _cols_t(a, i, s, m, zi)
+            for e in range(W):
+                v = zi[e]
+                v = -1.0 if v < -1.0 else v
+                zi[e] = 1.0 if v > 1.0 else v
         for i in range(nm):
             _cols_t(mem, i, s, m, zt[nx + na + i])
         for i in range(nr):
@@ -711,6 +727,13 @@ def linear_rows(
                 zi = zt[row_of[t]]
                 for e in range(W):
                     yj[e] += v * zi[e]
+        if ref_o.shape[1] > 0:  # the new exogenous row of a fixed goal: the old one, k in its last column
+            last = ref_o.shape[1] - 1
+            for e in range(m):
+                b = s + e
+                for j in range(last):
+                    ref_o[b, j] = ref[b, j]
+                ref_o[b, last] = k[b]
         for j in range(nx):  # and back, column by column
             _t_cols(yt[take[j]], x_o, j, s, m)
         for j in range(nm):
@@ -724,7 +747,7 @@ def linear_rows(
 @njit(cache=True, nogil=True)
 def step_rows(b0: int, b1: int, linear: tuple[np.ndarray, ...], *measure: Any) -> None:
     """A whole batched step for envs b0 <= b < b1: ``linear_rows(b0, b1, *linear, pos, vel)`` (``linear``: its
-    arguments from ``x`` to ``mem_o``, with the old row ``ref``) into ``measure``'s pos and vel, then
+    arguments from ``x`` to ``ref_o``, with the old row ``ref``) into ``measure``'s pos and vel, then
     ``measure_rows(b0, b1, *measure)`` on the new positions (``measure``: ``measure_rows``'s arguments from
     ``pos`` on, with the new row ``ref``)."""
     linear_rows(b0, b1, *linear, measure[0], measure[2])

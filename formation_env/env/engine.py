@@ -1208,30 +1208,29 @@ class Engine:
         part from the new positions; then the episode ends and the info arrays in numpy. Equal to the numpy step
         up to rounding (tests), and the same for any number of threads."""
         B, n, d, nl = state.x.shape[0], self.n, self.d, self.n_l
-        a = np.minimum(np.maximum(self.check_actions(actions, B), -1.0), 1.0)
-        af = a.reshape(B, -1)
+        # validated, not yet clipped: the kernels clip (and square, for the effort) as they read
+        af = np.require(self.check_actions(actions, B).reshape(B, -1), np.float64, ("C", "W"))
         params, sc = state.params, self.scenario
         k = state.k + 1
+        ref0 = np.ascontiguousarray(state.ref)
         if sc.moving_goal:
             ref = self._ref(params, k)
+            ref_o = ref[:, :0]  # the kernel writes no row
         else:
-            ref = state.ref.copy()
-            ref[:, -1] = k
+            ref = ref_o = np.empty_like(ref0)  # the old row, k in its last column (written by linear_rows)
         x_o, mem_o = np.empty((B, n * self.q)), np.empty((B, self.mem_dim))
         pos, vel = np.empty((B, n, d)), np.empty((B, n, d))
         mem = np.zeros((B, 0)) if state.memory is None else np.ascontiguousarray(state.memory.reshape(B, -1))
-        x, ref0 = np.ascontiguousarray(state.x.reshape(B, -1)), np.ascontiguousarray(state.ref)
-        lin = (x, af, mem, ref0, *self._Mc_csc, self._take)
+        x = np.ascontiguousarray(state.x.reshape(B, -1))
+        lin = (x, af, mem, ref0, k, *self._Mc_csc, self._take, x_o, mem_o, ref_o)
         obs, dist, flags, re = out = self._kernel_outputs(B)
-        meas = (pos, np.ascontiguousarray(state.pos), vel, ref, af * af, np.ascontiguousarray(state.goal_dist))
+        meas = (pos, np.ascontiguousarray(state.pos), vel, ref, af, np.ascontiguousarray(state.goal_dist))
         T = self.num_threads
         if self._bmode == _kernel.SENSE_GIVEN:  # the sensing needs the new positions first
-            _kernel.run_rows(_kernel.linear_rows, B, T, *lin, x_o, mem_o, pos, vel)
+            _kernel.run_rows(_kernel.linear_rows, B, T, *lin, pos, vel)
             _kernel.run_rows(_kernel.measure_rows, B, T, *meas, *self._geometry_args(pos, params), *out)
         else:
-            _kernel.run_rows(
-                _kernel.step_rows, B, T, (*lin, x_o, mem_o), *meas, *self._geometry_args(pos, params), *out
-            )
+            _kernel.run_rows(_kernel.step_rows, B, T, lin, *meas, *self._geometry_args(pos, params), *out)
         hit = self._false(B)
         if flags[:, 1].any():  # an agent was fast: swept checks (lower the clearance in dist, mark crossings)
             hit = np.zeros(B, dtype=bool)

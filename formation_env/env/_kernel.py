@@ -68,6 +68,7 @@ __all__ = [
     "settle_starts",
     "step1",
     "step_rows",
+    "swept_rows",
 ]
 
 #: How ``step1`` gets the leaders' obstacle sensing: a constant, the given array, or 2D rays on walls.
@@ -809,6 +810,72 @@ def episode_rows(
             rew[b, j] = re[b, j] + head
             gd[b, j] = dist[b, j]
         err[b], clear[b], streak[b] = er, cl, st
+
+
+@njit(cache=True, nogil=True)
+def swept_rows(
+    flags: np.ndarray,
+    prev: np.ndarray,
+    pos: np.ndarray,
+    a: np.ndarray,
+    e: np.ndarray,
+    circles: np.ndarray,
+    radius: float,
+    dist: np.ndarray,
+    col: int,
+    hit: np.ndarray,
+) -> None:
+    """``Engine._swept`` compiled, for the envs b with ``flags[b, 1]`` (an agent fast: it could tunnel): a motion
+    prev -> pos that properly crosses a wall (2D; ``geometry.segment_crossings``) marks ``hit[b]``; the swept
+    clearance from the circles (``geometry.circle_clearance``, minus ``radius``) lowers ``dist[b, col]`` and marks
+    ``hit[b]`` when negative. The same operations as the numpy code, per env.
+
+    Args:
+        flags (B, 2) bool: ``measure_rows``' flags; prev, pos (B, n, d): positions before and after (m);
+        a, e (B, S, 2): wall starts and vectors (S = 0: none); circles (B, C, d + 1): centres and radii;
+        radius: the agent radius (m); dist (B, k): ``measure_rows``' distances, column ``col`` the clearance.
+    Outputs: dist[:, col] lowered in place; hit (B,) bool set where a swept contact is found.
+    """
+    B, n, d = pos.shape
+    S, C = a.shape[1], circles.shape[1]
+    for b in range(B):
+        if not flags[b, 1]:
+            continue
+        if d == 2:
+            for i in range(n):
+                x0, y0, x1, y1 = prev[b, i, 0], prev[b, i, 1], pos[b, i, 0], pos[b, i, 1]
+                mx, my = x1 - x0, y1 - y0
+                for s in range(S):
+                    ax, ay, ex, ey = a[b, s, 0], a[b, s, 1], e[b, s, 0], e[b, s, 1]
+                    side0 = ex * (y0 - ay) - ey * (x0 - ax)
+                    side1 = ex * (y1 - ay) - ey * (x1 - ax)
+                    end0 = mx * (ay - y0) - my * (ax - x0)
+                    end1 = mx * (ay + ey - y0) - my * (ax + ex - x0)
+                    if (side0 * side1 < 0.0) & (end0 * end1 < 0.0):
+                        hit[b] = True
+        if C > 0:
+            cc = np.inf
+            for i in range(n):
+                for j in range(C):
+                    mm, wm = 0.0, 0.0
+                    for c in range(d):
+                        mv = pos[b, i, c] - prev[b, i, c]
+                        mm += mv * mv
+                        wm += (circles[b, j, c] - prev[b, i, c]) * mv
+                    t = wm / max(mm, 1e-300)
+                    t = 0.0 if t < 0.0 else (1.0 if t > 1.0 else t)
+                    dd = 0.0
+                    for c in range(d):
+                        mv = pos[b, i, c] - prev[b, i, c]
+                        v = (circles[b, j, c] - prev[b, i, c]) - t * mv
+                        dd += v * v
+                    v = np.sqrt(dd) - circles[b, j, d]
+                    cc = v if v < cc else cc
+            cc -= radius
+            if cc < dist[b, col]:
+                dist[b, col] = cc
+            if cc < 0.0:
+                hit[b] = True
 
 
 #: Fewest env rows a thread of ``run_rows`` gets: below it, handing work to a thread costs more than it saves.

@@ -1109,6 +1109,8 @@ class Engine:
         self._no_success_test = np.zeros(0, dtype=bool)  # episode_rows: the default success test
         self._no_walls = np.zeros((1, d + 1, 0))
         self._no_walls.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
+        self._no_seg = np.zeros((1, 0, 2))  # swept_rows: no walls
+        self._no_seg.setflags(write=False)
 
     def _sense_fill(self, B: int) -> Array:
         """A cached (B, n_l, ks) array of the constant sensing (no obstacles), or a (1, n_l, ks) dummy."""
@@ -1234,7 +1236,8 @@ class Engine:
         hit = self._false(B)
         if flags[:, 1].any():  # an agent was fast: swept checks (lower the clearance in dist, mark crossings)
             hit = np.zeros(B, dtype=bool)
-            self._swept(state.pos, pos, params, dist[:, nl + 2], hit, flags[:, 1])
+            walls = (params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)
+            _kernel.swept_rows(flags, meas[1], pos, *walls, params["circles"], self.agent_radius, dist, nl + 2, hit)
             hit.setflags(write=False)  # one array type for the kernel
         ok = self._no_success_test if self._fused_success else sc.is_success(dist[:, nl + 1], dist[:, nl])
         rew, gd = np.empty((B, nl)), np.empty((B, nl))

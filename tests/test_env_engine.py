@@ -380,3 +380,15 @@ def test_an_envs_step_depends_on_that_env_alone(scenario, compiled):
                 np.testing.assert_array_equal(np.asarray(info2[key])[0], np.asarray(val)[b], err_msg=key)
         s = new
     assert fast_steps > 0  # the case that coupled the envs: some envs fast, others not
+
+
+@pytest.mark.parametrize("scenario", ["narrow_passage", "obstacle_field", "hold"])
+def test_reset_each_observed_gives_the_observations_of_the_new_episodes(scenario):
+    """``reset_each_observed`` (the vec env's auto-resets) returns ``reset_each``'s episodes, and observations
+    equal to ``observe`` of them, taken from the reset's own measurement."""
+    eng = Engine(scenario, "double_integrator", "dynamic")
+    state, obs = eng.reset_each_observed([np.random.default_rng(s) for s in range(5)])
+    want = eng.reset_each([np.random.default_rng(s) for s in range(5)])
+    np.testing.assert_array_equal(state.pos, want.pos)
+    np.testing.assert_array_equal(obs, eng.observe(want))
+    assert obs.shape == (5, eng.n_l, eng.obs_dim) and obs.dtype == np.float32

@@ -734,7 +734,7 @@ class Engine:
         """Draw B new episodes from ``rng``: agents at rest on the scenario's start, law memory empty."""
         if int(B) != B or B < 1:
             raise FormationError(f"batch size B must be a positive integer, got {B}")
-        return self._reset_from(dict(self.scenario.reset(rng, int(B))))
+        return self._reset_from(dict(self.scenario.reset(rng, int(B))))[0]
 
     def reset_each(self, rngs: list[np.random.Generator]) -> EngineState:
         """One new episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` up to rounding (for
@@ -742,11 +742,21 @@ class Engine:
         (``Scenario.reset_each``), the rest batched."""
         if not rngs:
             raise FormationError("reset_each needs at least one generator")
-        return self._reset_from(dict(self.scenario.reset_each(rngs)))
+        return self._reset_from(dict(self.scenario.reset_each(rngs)))[0]
 
-    def _reset_from(self, params: dict[str, Array]) -> EngineState:
+    def reset_each_observed(self, rngs: list[np.random.Generator]) -> tuple[EngineState, NDArray[np.float32]]:
+        """``reset_each`` and the new episodes' observations, ``observe(state)`` (B, n_l, obs_dim) float32, taken
+        from the measurement that the reset makes anyway (the compiled path) instead of a second one."""
+        if not rngs:
+            raise FormationError("reset_each needs at least one generator")
+        state, obs = self._reset_from(dict(self.scenario.reset_each(rngs)))
+        return state, (self.observe(state) if obs is None else obs)
+
+    def _reset_from(self, params: dict[str, Array]) -> tuple[EngineState, NDArray[np.float32] | None]:
+        """The episodes of the scenario's draws ``params``, and their observations where the compiled measurement
+        gave them (else None)."""
         if self._swarm is not None:
-            return self._swarm.reset_from(params)
+            return self._swarm.reset_from(params), None
         B = int(params["segments"].shape[0])
         start = np.array(params.pop("start"), dtype=np.float64)
         k = np.zeros(B, dtype=np.int64)
@@ -757,8 +767,9 @@ class Engine:
             self._fold_episode(params, ref)
         for arr in params.values():
             arr.setflags(write=False)
+        obs = None
         if self._kbatch:
-            dist = self._measure_compiled(start, np.zeros_like(start), ref, params)[1]
+            obs, dist = self._measure_compiled(start, np.zeros_like(start), ref, params)[:2]
             goal_dist, err = dist[:, : self.n_l], dist[:, self.n_l]
         else:
             nv = self._norms(self._features(*self._aug(start), params, ref))
@@ -766,7 +777,7 @@ class Engine:
         at_rest = self.__dict__.get("_at_rest")  # x at rest from positions: dynamics.state_from_position, cached
         if at_rest is None:
             at_rest = self.__dict__["_at_rest"] = np.linalg.pinv(self.dynamics.C).T
-        return EngineState(
+        state = EngineState(
             x=start @ at_rest,
             pos=start,
             vel=np.zeros_like(start),
@@ -778,6 +789,7 @@ class Engine:
             streak=np.zeros(B, dtype=np.int64),
             params=params,
         )
+        return state, obs
 
     def _ref(self, params: dict[str, Array], k: NDArray[np.int64]) -> Array:
         """ref = [goal x*(k T), its velocity (x*((k+1) T) - x*(k T)) / T, 1, k], shape (B, 2 n d + 2)."""

@@ -216,9 +216,11 @@ class FormationVecEnv(VecEnv):
         lo = self.engine.observe(state) if leader_obs is None else leader_obs
         return lo.reshape(state.batch_size * self.n_l, -1)
 
-    def _draw(self, envs: NDArray[np.int64]) -> EngineState:
-        """New episodes for envs ``envs``, each from its own generator (B = 1 draws, as the single env)."""
-        return reset_batch(self.engine, [self._rngs[b] for b in envs])
+    def _draw(self, envs: NDArray[np.int64]) -> tuple[EngineState, NDArray[np.float32]]:
+        """New episodes for envs ``envs``, each from its own generator (B = 1 draws, as the single env), and their
+        slot observations (``Engine.reset_each_observed``: from the reset's own measurement)."""
+        state, lobs = self.engine.reset_each_observed([self._rngs[b] for b in envs])
+        return state, self._observe(state, lobs)
 
     def _slots(self, envs: NDArray[np.int64]) -> NDArray[np.int64]:
         """The slots of envs ``envs``, env by env."""
@@ -231,14 +233,14 @@ class FormationVecEnv(VecEnv):
         With ``draw_ahead`` > 0 they come from the spares; when one of them has none, or ``draw_ahead`` envs
         have none, every env without a spare draws its next episode first, in one batch."""
         if self.draw_ahead == 0:
-            fresh = self._draw(envs)
+            fresh, fresh_obs = self._draw(envs)
             _scatter(self.state, envs, fresh)
-            obs[self._slots(envs)] = self._observe(fresh)
+            obs[self._slots(envs)] = fresh_obs
             return
         empty = ~self._has_spare
         if empty[envs].any() or np.count_nonzero(empty) >= self.draw_ahead:
             fill = np.flatnonzero(empty)
-            fresh = self._draw(fill)
+            fresh, fresh_obs = self._draw(fill)
             if self._spare is None:
                 self._spare, params = _own(self.state)
                 self._spare_obs = np.empty_like(obs)
@@ -247,7 +249,7 @@ class FormationVecEnv(VecEnv):
                 rows["obs"] = _byte_rows(self._spare_obs.reshape(self.n_envs, -1))
                 self._spare_rows = {key: v for key, v in rows.items() if v is not None}
             _scatter(self._spare, fill, fresh)
-            self._spare_obs[self._slots(fill)] = self._observe(fresh)
+            self._spare_obs[self._slots(fill)] = fresh_obs
             self._has_spare[fill] = True
         self._take_spares(envs, obs)
         self._has_spare[envs] = False
@@ -300,10 +302,10 @@ class FormationVecEnv(VecEnv):
             state, self._param_rows = _own(self._spare)
             need = np.flatnonzero(~self._has_spare)
             if need.size:
-                _scatter(state, need, self._draw(need))
+                _scatter(state, need, self._draw(need)[0])
             self._has_spare[:] = False
         else:  # own every array: auto-resets write rows in place
-            state, self._param_rows = _own(self._draw(np.arange(B)))
+            state, self._param_rows = _own(self._draw(np.arange(B))[0])
         self.state = state
         self._params_owned = state.params
         self.reset_infos = [{} for _ in range(self.num_envs)]

@@ -202,6 +202,9 @@ class FormationVecEnv(VecEnv):
         self._spare_rows: dict[str, NDArray[np.uint8]] = {}  # byte rows of the spares' arrays (fields, params, obs)
         self._param_rows: dict[str, NDArray[np.uint8]] = {}  # and of self.state's params (for _kernel.copy_rows)
         self._params_owned: dict[str, NDArray[Any]] | None = None  # the params those rows belong to
+        self._row_keys: tuple[str, ...] = ()  # _cache_param_rows: the fields (and obs) _take_spares copies
+        self._param_views: list[NDArray[np.uint8]] = []  # and the byte rows of params, state's and spares'
+        self._param_src: tuple[NDArray[np.uint8], ...] = ()
         self._has_spare = np.zeros(B, dtype=bool)
         self._actions: NDArray[np.float64] | None = None
         self.last_info: dict[str, Any] = {}
@@ -248,11 +251,21 @@ class FormationVecEnv(VecEnv):
                 rows.update({"params." + key: v for key, v in params.items()})
                 rows["obs"] = _byte_rows(self._spare_obs.reshape(self.n_envs, -1))
                 self._spare_rows = {key: v for key, v in rows.items() if v is not None}
+                self._cache_param_rows()
             _scatter(self._spare, fill, fresh)
             self._spare_obs[self._slots(fill)] = fresh_obs
             self._has_spare[fill] = True
         self._take_spares(envs, obs)
         self._has_spare[envs] = False
+
+    def _cache_param_rows(self) -> None:
+        """The fixed parts of ``_take_spares``' copy: the byte rows of the state's params and of the spares' (both
+        owned by the vec env, kept across steps), and the state fields (and obs) it copies."""
+        keys = [f for f in _FIELDS if self.state is not None and getattr(self.state, f) is not None]
+        self._row_keys = tuple(f for f in keys if getattr(self.state, f).size) + ("obs",)
+        pairs = [(v, self._spare_rows.get("params." + k)) for k, v in self._param_rows.items()]
+        self._param_views = [v for v, src in pairs if src is not None]
+        self._param_src = tuple(src for _, src in pairs if src is not None)
 
     def _take_spares(self, envs: NDArray[np.int64], obs: NDArray[np.float32]) -> None:
         """Rows ``envs`` of the spares into ``self.state`` and into the slots of ``obs`` (those of env b are rows
@@ -265,20 +278,16 @@ class FormationVecEnv(VecEnv):
             return
         src, rows = [], self._spare_rows
         dst: list[NDArray[np.uint8]] = []
-        pairs = [(f, getattr(state, f)) for f in _FIELDS] + [("obs", obs.reshape(B, -1))]
-        for key, a in pairs:
-            if a is None or not a.size:
-                continue
+        for key in self._row_keys:  # the state's arrays are new each step: their byte rows too
+            a = obs.reshape(B, -1) if key == "obs" else getattr(state, key)
             view = _byte_rows(a)
             if view is None or key not in rows:
                 a[envs] = (getattr(spare, key) if key != "obs" else self._spare_obs.reshape(B, -1))[envs]
             else:
                 dst.append(view)
                 src.append(rows[key])
-        for key, view in self._param_rows.items():
-            dst.append(view)
-            src.append(rows["params." + key])
-        _kernel.copy_rows(tuple(dst), envs, tuple(src), envs)
+        dst += self._param_views
+        _kernel.copy_rows(tuple(dst), envs, (*src, *self._param_src), envs)
 
     # ---------------------------------------------------------------- VecEnv API
     def seed(self, seed: int | None = None) -> Sequence[int | None]:
@@ -308,6 +317,7 @@ class FormationVecEnv(VecEnv):
             state, self._param_rows = _own(self._draw(np.arange(B))[0])
         self.state = state
         self._params_owned = state.params
+        self._cache_param_rows()
         self.reset_infos = [{} for _ in range(self.num_envs)]
         self._reset_options()
         return self._observe(self.state)
@@ -347,7 +357,8 @@ class FormationVecEnv(VecEnv):
         envs = np.flatnonzero(done_env)
         if not envs.size:
             return obs, rews, dones, envs, obs[:0]
-        final = obs[self._slots(envs)]  # a copy: obs is overwritten next
+        # a copy (obs is overwritten next): env rows of the (B, k, obs dim) view, one index per env, not per slot
+        final = obs.reshape(B, k, -1)[envs].reshape(envs.size * k, -1)
         self._next_episodes(envs, obs)
         return obs, rews, dones, envs, final
 

@@ -136,7 +136,40 @@ def test_gymnasium_adapter_same_step_autoreset():
         assert rew.shape == term.shape == trunc.shape == (2,)
     assert trunc.all() and not term.any()
     assert info["_final_obs"].all() and info["final_obs"][0].shape == genv.single_observation_space.shape
-    assert "terminal_observation" not in info["final_info"][0]
+    fi = info["final_info"]  # Gymnasium's layout (SyncVectorEnv): a dict of arrays over envs, with masks
+    assert isinstance(fi, dict) and "terminal_observation" not in fi and info["_final_info"].all()
+    assert fi["success"].dtype == bool and fi["formation_error"].shape == (2,) and fi["_success"].all()
+    np.testing.assert_array_equal(fi["time"], venv.last_info["time"])
+
+
+def test_gymnasium_final_info_matches_sync_vector_env_layout():
+    """Shared mode, some envs finishing: final_obs / final_info only at the finished envs' slots, with masks, in
+    the layout that gymnasium's own _add_info gives for the same per-slot infos."""
+    import gymnasium
+
+    venv = FormationVecEnv("narrow_passage", num_envs=6, mode="shared", seed=3)
+    genv = venv.to_gymnasium()
+    genv.reset(seed=3)
+    rng = np.random.default_rng(0)
+    for _ in range(400):
+        obs, rew, term, trunc, info = genv.step(rng.uniform(-1, 1, (genv.num_envs, venv.p)))
+        done = term | trunc
+        if done.any() and not done.all():
+            break
+    assert done.any() and not done.all()
+    ref = gymnasium.vector.SyncVectorEnv.__new__(gymnasium.vector.SyncVectorEnv)
+    ref.num_envs = genv.num_envs
+    want: dict = {}
+    for s in np.flatnonzero(done):
+        b = s // venv.n_l
+        single = {key: venv.last_info[key][b].item() for key in info["final_info"] if not key.startswith("_")}
+        want = ref._add_info(want, {"final_obs": info["final_obs"][s], "final_info": single}, s)
+    assert set(want) == set(info) and set(want["final_info"]) == set(info["final_info"])
+    np.testing.assert_array_equal(want["_final_obs"], info["_final_obs"])
+    for key, arr in want["final_info"].items():
+        np.testing.assert_array_equal(arr, info["final_info"][key], err_msg=key)
+        assert arr.dtype == info["final_info"][key].dtype, key
+    assert all(info["final_obs"][s] is None for s in np.flatnonzero(~done))
 
 
 def test_get_attr_and_env_method():

@@ -30,8 +30,9 @@ info dicts; the batched engine info of the last step is ``last_info`` (arrays (B
 
 Gymnasium: :meth:`FormationVecEnv.to_gymnasium` (or :class:`GymnasiumFormationVecEnv`)
 wraps it as a ``gymnasium.vector.VectorEnv`` with same-step auto-reset
-(``AutoresetMode.SAME_STEP``: ``info["final_obs"]``, ``info["final_info"]`` and the
-masks ``info["_final_obs"]``), separate ``terminated`` / ``truncated`` arrays.
+(``AutoresetMode.SAME_STEP``: ``info["final_obs"]``, ``info["final_info"]`` (a dict of arrays over
+slots, as Gymnasium's ``SyncVectorEnv`` makes it) and the masks ``info["_final_obs"]``), separate
+``terminated`` / ``truncated`` arrays.
 
 Example::
 
@@ -445,9 +446,12 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
     """A ``gymnasium.vector.VectorEnv`` view of a :class:`FormationVecEnv` (same state, same slots).
 
     ``step`` returns (obs, rewards, terminated, truncated, info) per slot, auto-resetting
-    finished envs in the same step (``metadata["autoreset_mode"] = AutoresetMode.SAME_STEP``):
-    ``info["final_obs"]`` (object array, None where not finished), ``info["final_info"]``
-    and the boolean masks ``info["_final_obs"]``, ``info["_final_info"]``.
+    finished envs in the same step (``metadata["autoreset_mode"] = AutoresetMode.SAME_STEP``), in
+    the layout of Gymnasium's own vector envs (``SyncVectorEnv``): ``info["final_obs"]`` (object
+    array, None where not finished) and ``info["final_info"]``, a dict of arrays over slots (``success``,
+    ``collision``, ``out_of_bounds``, ``formation_error``, ``goal_distance``, ``time``, each with its mask
+    ``_success`` etc.), and the boolean masks ``info["_final_obs"]``, ``info["_final_info"]``: the finished
+    slots.
 
     Args:
         venv: the SB3 vec env to expose (or build one: ``GymnasiumFormationVecEnv(FormationVecEnv(...))``).
@@ -475,8 +479,7 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
     def step(
         self, actions: ArrayLike
     ) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], NDArray[np.bool_], dict[str, Any]]:
-        """Step every slot; see the class docstring for the info layout (no per-slot dicts but the finished
-        slots' ``final_info``)."""
+        """Step every slot; see the class docstring for the info layout (no per-slot dicts: arrays over slots)."""
         v = self.venv
         v.step_async(actions)
         obs, rews, dones, envs, final = v._step_slots()
@@ -485,10 +488,16 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
         trunc = np.repeat(v.last_truncated, k)
         info: dict[str, Any] = {}
         if envs.size:
-            final_obs = np.full(self.num_envs, None, dtype=object)
-            final_info = np.full(self.num_envs, None, dtype=object)
-            for s, inf, fin in zip(*v._slot_infos(envs, final, truncated_key=False), strict=True):
-                final_obs[s], final_info[s] = fin, inf
+            slots = v._slots(envs)
+            final_obs = np.empty(self.num_envs, dtype=object)  # None-filled
+            for s, fin in zip(slots.tolist(), final, strict=True):
+                final_obs[s] = fin
+            final_info: dict[str, Any] = {}
+            for key in _DONE_INFO:  # the engine's info of the finished envs, at their slots (0 elsewhere)
+                col = v.last_info[key]
+                arr = np.zeros(self.num_envs, dtype=col.dtype)
+                arr[slots] = np.repeat(col[envs], k) if k > 1 else col[envs]
+                final_info[key], final_info["_" + key] = arr, dones.copy()
             info = {"final_obs": final_obs, "_final_obs": dones.copy(), "final_info": final_info, "_final_info": dones}
         return obs, rews, term, trunc, info
 

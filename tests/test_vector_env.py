@@ -152,7 +152,7 @@ def test_gymnasium_final_info_matches_sync_vector_env_layout():
     genv.reset(seed=3)
     rng = np.random.default_rng(0)
     for _ in range(400):
-        obs, rew, term, trunc, info = genv.step(rng.uniform(-1, 1, (genv.num_envs, venv.p)))
+        _, _, term, trunc, info = genv.step(rng.uniform(-1, 1, (genv.num_envs, venv.p)))
         done = term | trunc
         if done.any() and not done.all():
             break

@@ -496,7 +496,7 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
             for key in _DONE_INFO:  # the engine's info of the finished envs, at their slots (0 elsewhere)
                 col = v.last_info[key]
                 arr = np.zeros(self.num_envs, dtype=col.dtype)
-                arr[slots] = np.repeat(col[envs], k) if k > 1 else col[envs]
+                arr.reshape(v.n_envs, k)[envs] = col[envs, None]  # env b's value in its k slots
                 final_info[key], final_info["_" + key] = arr, dones.copy()
             info = {"final_obs": final_obs, "_final_obs": dones.copy(), "final_info": final_info, "_final_info": dones}
         return obs, rews, term, trunc, info

@@ -1047,17 +1047,34 @@ class Engine:
         return new, obs, re[:, :nl], terminated, truncated, info
 
     def _guarded(
-        self, out: Array, prev: Array, pos: Array, params: dict[str, Array], clear: Array, collision: NDArray[np.bool_]
+        self,
+        out: Array,
+        prev: Array,
+        pos: Array,
+        params: dict[str, Array],
+        clear: Array,
+        collision: NDArray[np.bool_],
+        compiled: bool = False,
     ) -> NDArray[np.bool_]:
         """The rare part of a step whose guard tripped: leaving the world box, and swept (tunnelling) contacts
         of fast agents from ``prev`` to ``pos`` (B, n, d). Updates ``clear`` and ``collision`` (B,) in place;
-        returns out_of_bounds (B,)."""
+        returns out_of_bounds (B,). ``compiled``: the swept checks by ``_kernel.swept_rows`` (the same operations;
+        ``step1``), else in numpy (the reference step)."""
         cols = self._cols
         oob = out[:, cols["box"]].min(axis=1) < 0.0
         collision |= oob
         fast = out[:, cols["speed"]].min(axis=1) < 0.0
         if fast.any():
-            self._swept(prev, pos, params, clear, collision, fast)
+            if compiled and _kernel.AVAILABLE:
+                flags = np.zeros((fast.shape[0], 2), dtype=bool)
+                flags[:, 1] = fast
+                hit = np.zeros(fast.shape[0], dtype=bool)
+                walls = (params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)
+                p0, p1 = np.ascontiguousarray(prev), np.ascontiguousarray(pos)
+                _kernel.swept_rows(flags, p0, p1, *walls, params["circles"], self.agent_radius, clear[:, None], 0, hit)
+                collision |= hit
+            else:
+                self._swept(prev, pos, params, clear, collision, fast)
         return oob
 
     def _swept(
@@ -1395,7 +1412,7 @@ class Engine:
         oob_f = False
         if gmin < 0.0:  # left the world box, or an agent was fast: swept checks
             clear, collision = np.array([clear_f]), np.array([collision_f])
-            oob_f = bool(self._guarded(out, state.pos, pos, params, clear, collision)[0])
+            oob_f = bool(self._guarded(out, state.pos, pos, params, clear, collision, compiled=True)[0])
             clear_f, collision_f = float(clear[0]), bool(collision[0])
         nvl = nv.tolist()
         err = nvl[-1]

@@ -28,7 +28,9 @@
   tracemalloc growth over many env steps (a leak shows as growth per step).
 
 Ratios are ours / theirs in speed (> 1: ours faster), the median over interleaved repeats,
-with the min-max of the per-repeat ratios. Comparisons whose package is missing (the
+with the min-max of the per-repeat ratios. In (b) each fn's turn lasts about 50 ms (at least 10 calls), so
+that the slower first calls after a switch weigh alike on both (``python -m benchmarks.vec_profile --switch``).
+Comparisons whose package is missing (the
 ``bench`` extra: ``pip install formation-env[bench]``) are skipped with a message.
 """
 

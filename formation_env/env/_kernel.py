@@ -1045,7 +1045,7 @@ def copy_rows(dst: tuple[np.ndarray, ...], idx: np.ndarray, src: tuple[np.ndarra
         nb = d.shape[1]
         for i in range(idx.shape[0]):
             di, si = idx[i], src_idx[i]
-            for j in range(nb):  # a loop, not a slice copy: ~3x faster for rows of tens of bytes
+            for j in range(nb):  # a loop, not a slice copy (each slice made a view): rows of tens of bytes
                 d[di, j] = s[si, j]
 
 

@@ -240,6 +240,15 @@ def bench_single(quick: bool) -> list[Row]:
 
 
 # ---------------------------------------------------------------------------- (b) batched
+def _vmas_env(scenario: str, B: int, **kwargs: Any) -> tuple[Any, list[Any]]:
+    """A reset VMAS CPU env of ``B`` envs (continuous actions, seed 0) and 8 prepared random action sets."""
+    import vmas
+
+    env = vmas.make_env(scenario, num_envs=B, device="cpu", continuous_actions=True, seed=0, **kwargs)
+    env.reset()
+    return env, [[env.get_random_action(a) for a in env.agents] for _ in range(8)]
+
+
 def _vmas_step(env: Any, vacts: list[Any], threads: int) -> Callable[[], None]:
     """One VMAS step on ``threads`` torch threads, cycling through the 8 prepared action sets ``vacts``."""
     import torch
@@ -299,13 +308,10 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
     rows: list[Row] = []
     if _have("vmas"):
         import torch
-        import vmas
 
         default_threads = torch.get_num_threads()
         for scen in ("simple_spread", "navigation"):
-            env = vmas.make_env(scen, num_envs=B, device="cpu", continuous_actions=True, n_agents=10, seed=0)
-            env.reset()
-            vacts = [[env.get_random_action(a) for a in env.agents] for _ in range(8)]
+            env, vacts = _vmas_env(scen, B, n_agents=10)
             for threads in (default_threads, 2, 1):
                 key = f"vmas_{scen}_{threads}"
                 if key in fns:
@@ -315,9 +321,7 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
                     " (default)" if threads == default_threads else ""
                 )
         # VMAS's own default size (simple_spread: n_agents=3), the cheapest VMAS case to compare with
-        env3 = vmas.make_env("simple_spread", num_envs=B, device="cpu", continuous_actions=True, seed=0)
-        env3.reset()
-        vacts3 = [[env3.get_random_action(a) for a in env3.agents] for _ in range(8)]
+        env3, vacts3 = _vmas_env("simple_spread", B)
         for threads in dict.fromkeys((default_threads, 1)):
             key = "vmas_simple_spread_n3" + ("" if threads == default_threads else f"_t{threads}")
             fns[key] = _vmas_step(env3, vacts3, threads)
@@ -347,6 +351,10 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
 
 
 # ---------------------------------------------------------------------------- (c) PPO
+#: PPO's settings in (c) and in ``benchmarks.ppo_profile`` (n_steps 256 with one env, 64 with 8)
+PPO_SETTINGS: dict[str, Any] = {"batch_size": 64, "n_epochs": 4, "device": "cpu", "seed": 0, "verbose": 0}
+
+
 def bench_ppo(quick: bool) -> list[Row]:
     """PPO ``learn`` timesteps/s, torch on 1 thread (a 64x64 MLP gains nothing from more; on a shared
     machine more threads made the spread of repeats 15x wider)."""
@@ -359,7 +367,6 @@ def bench_ppo(quick: bool) -> list[Row]:
     from formation_env.env.vector import FormationVecEnv
 
     steps = 1024 if quick else 2048
-    settings = {"batch_size": 64, "n_epochs": 4, "device": "cpu", "seed": 0, "verbose": 0}
     cid = "formation_env/FormationCommander-v0"
     makers: dict[str, tuple[Callable[[], Any], int]] = {
         "commander": (lambda: gym.make(cid), 1),
@@ -374,7 +381,7 @@ def bench_ppo(quick: bool) -> list[Row]:
 
         def go() -> None:
             env = make()
-            PPO("MlpPolicy", env, n_steps=256 if n_envs == 1 else 64, **settings).learn(total_timesteps=total)
+            PPO("MlpPolicy", env, n_steps=256 if n_envs == 1 else 64, **PPO_SETTINGS).learn(total_timesteps=total)
             env.close()
 
         return go

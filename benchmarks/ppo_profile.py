@@ -19,7 +19,8 @@ from typing import Any
 
 import numpy as np
 
-SETTINGS: dict[str, Any] = {"batch_size": 64, "n_epochs": 4, "device": "cpu", "seed": 0, "verbose": 0}
+from .env_bench import PPO_SETTINGS as SETTINGS
+
 COMMANDER = "formation_env/FormationCommander-v0"
 
 

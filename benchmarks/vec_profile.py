@@ -39,16 +39,23 @@ def _timed(owner: Any, name: str, totals: dict[str, float]) -> None:
     setattr(owner, name, wrapper)
 
 
-def profile(scenario: str, B: int = 1024, steps: int = 400) -> dict[str, float]:
-    """Milliseconds per step of the whole step and of its parts (see the module docstring)."""
+def _warm(scenario: str, B: int) -> tuple[Any, list[np.ndarray]]:
+    """The benchmark's vec env (B envs of the 10-agent framework) after 150 steps, in the steady state of auto-resets,
+    and its 8 action sets (random, in [-0.3, 0.3])."""
     from formation_env.env.vector import FormationVecEnv
 
     v = FormationVecEnv(scenario, num_envs=B, mode="shared", seed=0, framework=_ten_agent_framework())
     v.reset()
     rng = np.random.default_rng(0)
     acts = [rng.uniform(-0.3, 0.3, (v.num_envs, v.p)).astype(np.float32) for _ in range(8)]
-    for i in range(150):  # into the steady state of auto-resets
+    for i in range(150):
         v.step(acts[i & 7])
+    return v, acts
+
+
+def profile(scenario: str, B: int = 1024, steps: int = 400) -> dict[str, float]:
+    """Milliseconds per step of the whole step and of its parts (see the module docstring)."""
+    v, acts = _warm(scenario, B)
     totals = dict.fromkeys(("step", "_next_episodes", "_slot_infos"), 0.0)
     _timed(v.engine, "step", totals)
     _timed(v, "_next_episodes", totals)
@@ -74,23 +81,11 @@ def profile(scenario: str, B: int = 1024, steps: int = 400) -> dict[str, float]:
 def switch_cost(scenario: str, B: int = 1024, turns: int = 40, calls: int = 30) -> dict[str, list[float]]:
     """Median milliseconds of the j-th call of a turn (j = 0 .. calls - 1), ours and VMAS's alternating."""
     import torch
-    import vmas
 
-    from formation_env.env.vector import FormationVecEnv
+    from .env_bench import _vmas_env, _vmas_step
 
-    from .env_bench import _vmas_step
-
-    v = FormationVecEnv(scenario, num_envs=B, mode="shared", seed=0, framework=_ten_agent_framework())
-    v.reset()
-    rng = np.random.default_rng(0)
-    acts = [rng.uniform(-0.3, 0.3, (v.num_envs, v.p)).astype(np.float32) for _ in range(8)]
-    for i in range(150):
-        v.step(acts[i & 7])
-    env3 = vmas.make_env("simple_spread", num_envs=B, device="cpu", continuous_actions=True, seed=0)
-    env3.reset()
-    vstep = _vmas_step(
-        env3, [[env3.get_random_action(a) for a in env3.agents] for _ in range(8)], torch.get_num_threads()
-    )
+    v, acts = _warm(scenario, B)
+    vstep = _vmas_step(*_vmas_env("simple_spread", B), torch.get_num_threads())
     fns = {"ours": lambda j: v.step(acts[j & 7]), "vmas": lambda j: vstep()}
     per = {k: np.zeros((turns, calls)) for k in fns}
     for t in range(turns):

@@ -478,9 +478,7 @@ def test_swept_rows_equal_the_numpy_swept_checks(scenario):
     dist = rng.normal(size=(B, eng.n_l + 4))
     want_clear, want_hit = dist[:, eng.n_l + 2].copy(), np.zeros(B, dtype=bool)
     eng._swept(prev, pos, s.params, want_clear, want_hit, flags[:, 1])
-    hit = np.zeros(B, dtype=bool)
-    walls = (s.params["_a"], s.params["_e"]) if eng.n_seg else (eng._no_seg, eng._no_seg)
-    _kernel.swept_rows(flags, prev, pos, *walls, s.params["circles"], eng.agent_radius, dist, eng.n_l + 2, hit)
+    hit = eng._swept_compiled(flags, prev, pos, s.params, dist, eng.n_l + 2)  # _kernel.swept_rows
     np.testing.assert_array_equal(hit, want_hit)
     np.testing.assert_allclose(dist[:, eng.n_l + 2], want_clear, rtol=0, atol=1e-12)
     assert want_hit.any() and not want_hit[~flags[:, 1]].any()

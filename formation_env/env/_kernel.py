@@ -329,13 +329,13 @@ def measure_rows(
     nf = na + 2 * nl
     sqn = np.sqrt(float(n))
     W = MEASURE_BLOCK
-    pt = np.zeros((nd, W))  # the block's positions, transposed: row i d + c is p[i, c] of each env
-    vt = np.zeros((nl * d, W))  # leaders' velocities
-    gt = np.zeros((2 * nd + 2, W))  # ref
-    tt = np.zeros((nt, W))  # thresholds
-    ct = np.zeros((C * d, W))  # circle centres
-    wt = np.zeros(((d + 1) * 3 * S, W))  # wall maps
-    ft = np.zeros((nf, W))  # reward features [a2, gprev, goal distances of the leaders]
+    pt = np.empty((nd, W))  # the block's positions, transposed: row i d + c is p[i, c] of each env
+    vt = np.empty((nl * d, W))  # leaders' velocities
+    gt = np.empty((2 * nd + 2, W))  # ref
+    tt = np.empty((nt, W))  # thresholds
+    ct = np.empty((C * d, W))  # circle centres
+    wt = np.empty(((d + 1) * 3 * S, W))  # wall maps
+    ft = np.empty((nf, W))  # reward features [a2, gprev, goal distances of the leaders]
     coef = np.empty(((d + 1) * d, W))
     lin = np.empty((L1, W))
     acc = np.empty(W)
@@ -351,7 +351,7 @@ def measure_rows(
     err = np.empty(W)
     oob = np.empty(W, dtype=np.bool_)
     fst = np.empty(W, dtype=np.bool_)
-    moved = np.zeros(W)  # per env, the largest per-axis displacement of an agent
+    moved = np.empty(W)  # per env, the largest per-axis displacement of an agent
     rt = np.empty((nw, W))
     best = np.empty(R)  # one leader's readings, per env
     shared = thr.shape[0] == 1  # one row of thresholds for every env: transposed once
@@ -361,25 +361,19 @@ def measure_rows(
                 tt[j, e] = thr[0, j]
     for s0 in range(b0, b1, W):
         m = min(W, b1 - s0)
-        # the block, transposed (feature by feature; a full block in loops of constant length): then every loop
-        # below runs over the W envs of the block (SIMD), lanes past m of a last, partial block on stale values
+        # the block, transposed (column by column, ``_rows_t``): then every loop below runs over its envs (SIMD)
         for i in range(n):
             for c in range(d):
                 _rows_t(pos[:, i, c], s0, m, pt[i * d + c])
-        for e in range(W):
+        for e in range(m):
             moved[e] = 0.0
-        for i in range(n):  # the largest per-axis displacement: the fast-agent test
+        for i in range(n):  # the largest per-axis displacement (prev read in place): the fast-agent test
             for c in range(d):
                 pc = pt[i * d + c]
-                if m == W:
-                    for e in range(W):
-                        step = abs(pc[e] - prev[s0 + e, i, c])
-                        moved[e] = step if step > moved[e] else moved[e]
-                else:
-                    for e in range(m):
-                        step = abs(pc[e] - prev[s0 + e, i, c])
-                        moved[e] = step if step > moved[e] else moved[e]
-        for e in range(W):
+                for e in range(m):
+                    step = abs(pc[e] - prev[s0 + e, i, c])
+                    moved[e] = step if step > moved[e] else moved[e]
+        for e in range(m):
             fst[e] = moved[e] > fast
         for li in range(nl):
             a = leaders[li]
@@ -401,7 +395,7 @@ def measure_rows(
         for j in range(na):  # the squared clipped actions
             fj = ft[j]
             _rows_t(act[:, j], s0, m, fj)
-            for e in range(W):
+            for e in range(m):
                 v = fj[e]
                 v = -1.0 if v < -1.0 else v
                 v = 1.0 if v > 1.0 else v
@@ -456,7 +450,7 @@ def measure_rows(
                         wb[e] += pe * y2[e]
                 if mode == 2 and lead[i] >= 0:
                     r0 = (lead[i] * S + s) * 3
-                    lw[r0, :], lw[r0 + 1, :], lw[r0 + 2, :] = wa[:], wl[:], wb[:]
+                    lw[r0, :m], lw[r0 + 1, :m], lw[r0 + 2, :m] = wa[:m], wl[:m], wb[:m]
                 for e in range(m):
                     across, along, back = wa[e], wl[e], wb[e]
                     ex = along if along > back else back
@@ -619,40 +613,6 @@ def measure_rows(
 LINEAR_BLOCK = 64
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _cols_t(src: np.ndarray, j: int, s0: int, m: int, row: np.ndarray) -> None:
-    """``row[:m] = src[s0:s0 + m, j]`` (a column of env rows into a row of a ``linear_rows`` block), in a loop of
-    constant length ``LINEAR_BLOCK`` for a full block."""
-    if m == LINEAR_BLOCK:
-        for e in range(LINEAR_BLOCK):
-            row[e] = src[s0 + e, j]
-    else:
-        for e in range(m):
-            row[e] = src[s0 + e, j]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _t_cols(row: np.ndarray, dst: np.ndarray, j: int, s0: int, m: int) -> None:
-    """``dst[s0:s0 + m, j] = row[:m]``: the inverse of ``_cols_t``."""
-    if m == LINEAR_BLOCK:
-        for e in range(LINEAR_BLOCK):
-            dst[s0 + e, j] = row[e]
-    else:
-        for e in range(m):
-            dst[s0 + e, j] = row[e]
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _t_cols3(row: np.ndarray, dst: np.ndarray, i: int, c: int, s0: int, m: int) -> None:
-    """``dst[s0:s0 + m, i, c] = row[:m]``."""
-    if m == LINEAR_BLOCK:
-        for e in range(LINEAR_BLOCK):
-            dst[s0 + e, i, c] = row[e]
-    else:
-        for e in range(m):
-            dst[s0 + e, i, c] = row[e]
-
-
 @njit(cache=True, nogil=True)
 def linear_rows(
     b0: int,
@@ -701,48 +661,47 @@ def linear_rows(
         nz = max(nz, row_of[t] + 1)
     nr = max(nz - nx - na - nm, 0)
     W = LINEAR_BLOCK
-    zt = np.zeros((nx + na + nm + nr, W))  # zeros: the lanes of a partial block stay finite
+    zt = np.empty((nx + na + nm + nr, W))
     yt = np.empty((ncol, W))
     c0 = nx + nm
     for s in range(b0, b1, W):
         m = min(W, b1 - s)
-        for i in range(nx):  # z of the block, transposed (column by column: vectorised for a full block)
-            _cols_t(x, i, s, m, zt[i])
-        for i in range(na):  # the actions, clipped to [-1, 1]
-            zi = zt[nx + i]
-            _cols_t(a, i, s, m, zi)
-            for e in range(W):
-                v = zi[e]
+        for e in range(m):  # z of the block, transposed (the actions clipped to [-1, 1])
+            b = s + e
+            for i in range(nx):
+                zt[i, e] = x[b, i]
+            for i in range(na):
+                v = a[b, i]
                 v = -1.0 if v < -1.0 else v
-                zi[e] = 1.0 if v > 1.0 else v
-        for i in range(nm):
-            _cols_t(mem, i, s, m, zt[nx + na + i])
-        for i in range(nr):
-            _cols_t(ref, i, s, m, zt[nx + na + nm + i])
-        for j in range(ncol):  # over the whole block (lanes past m of a partial block: stale, unused)
+                zt[nx + i, e] = 1.0 if v > 1.0 else v
+            for i in range(nm):
+                zt[nx + na + i, e] = mem[b, i]
+            for i in range(nr):
+                zt[nx + na + nm + i, e] = ref[b, i]
+        for j in range(ncol):
             yj = yt[j]
-            for e in range(W):
+            for e in range(m):
                 yj[e] = 0.0
             for t in range(ptr[j], ptr[j + 1]):
                 v = val[t]
                 zi = zt[row_of[t]]
-                for e in range(W):
+                for e in range(m):
                     yj[e] += v * zi[e]
-        if ref_o.shape[1] > 0:  # the new exogenous row of a fixed goal: the old one, k in its last column
-            last = ref_o.shape[1] - 1
-            for e in range(m):
-                b = s + e
+        last = ref_o.shape[1] - 1  # -1: ref_o has width 0, the goal moves (ref' is made in numpy)
+        for e in range(m):
+            b = s + e
+            for j in range(nx):
+                x_o[b, j] = yt[take[j], e]
+            for j in range(nm):
+                mem_o[b, j] = yt[take[nx + j], e]
+            for i in range(n):
+                for c in range(d):
+                    pos_o[b, i, c] = yt[take[c0 + i * d + c], e]
+                    vel_o[b, i, c] = yt[take[c0 + n * d + i * d + c], e]
+            if last >= 0:  # the new exogenous row of a fixed goal: the old one, k in its last column
                 for j in range(last):
                     ref_o[b, j] = ref[b, j]
                 ref_o[b, last] = k[b]
-        for j in range(nx):  # and back, column by column
-            _t_cols(yt[take[j]], x_o, j, s, m)
-        for j in range(nm):
-            _t_cols(yt[take[nx + j]], mem_o, j, s, m)
-        for i in range(n):
-            for c in range(d):
-                _t_cols3(yt[take[c0 + i * d + c]], pos_o, i, c, s, m)
-                _t_cols3(yt[take[c0 + n * d + i * d + c]], vel_o, i, c, s, m)
 
 
 @njit(cache=True, nogil=True)

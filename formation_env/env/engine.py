@@ -740,17 +740,18 @@ class Engine:
         """One new episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` up to rounding (for
         vectorised envs whose copies are seeded one by one). Only the scenario's draws run per generator
         (``Scenario.reset_each``), the rest batched."""
-        if not rngs:
-            raise FormationError("reset_each needs at least one generator")
-        return self._reset_from(dict(self.scenario.reset_each(rngs)))[0]
+        return self._reset_each(rngs)[0]
 
     def reset_each_observed(self, rngs: list[np.random.Generator]) -> tuple[EngineState, NDArray[np.float32]]:
         """``reset_each`` and the new episodes' observations, ``observe(state)`` (B, n_l, obs_dim) float32, taken
         from the measurement that the reset makes anyway (the compiled path) instead of a second one."""
+        state, obs = self._reset_each(rngs)
+        return state, (self.observe(state) if obs is None else obs)
+
+    def _reset_each(self, rngs: list[np.random.Generator]) -> tuple[EngineState, NDArray[np.float32] | None]:
         if not rngs:
             raise FormationError("reset_each needs at least one generator")
-        state, obs = self._reset_from(dict(self.scenario.reset_each(rngs)))
-        return state, (self.observe(state) if obs is None else obs)
+        return self._reset_from(dict(self.scenario.reset_each(rngs)))
 
     def _reset_from(self, params: dict[str, Array]) -> tuple[EngineState, NDArray[np.float32] | None]:
         """The episodes of the scenario's draws ``params``, and their observations where the compiled measurement
@@ -1068,14 +1069,21 @@ class Engine:
             if compiled and _kernel.AVAILABLE:
                 flags = np.zeros((fast.shape[0], 2), dtype=bool)
                 flags[:, 1] = fast
-                hit = np.zeros(fast.shape[0], dtype=bool)
-                walls = (params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)
-                p0, p1 = np.ascontiguousarray(prev), np.ascontiguousarray(pos)
-                _kernel.swept_rows(flags, p0, p1, *walls, params["circles"], self.agent_radius, clear[:, None], 0, hit)
-                collision |= hit
+                collision |= self._swept_compiled(flags, prev, pos, params, clear[:, None], 0)
             else:
                 self._swept(prev, pos, params, clear, collision, fast)
         return oob
+
+    def _swept_compiled(
+        self, flags: NDArray[np.bool_], prev: Array, pos: Array, params: dict[str, Array], dist: Array, col: int
+    ) -> NDArray[np.bool_]:
+        """``_swept`` by ``_kernel.swept_rows`` in the envs where ``flags[:, 1]`` (flags (B, 2) bool): lowers
+        ``dist[:, col]`` (the clearance) in place; returns the envs with a swept contact (B,) bool."""
+        hit = np.zeros(flags.shape[0], dtype=bool)
+        walls = (params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)
+        p0, p1 = np.ascontiguousarray(prev), np.ascontiguousarray(pos)
+        _kernel.swept_rows(flags, p0, p1, *walls, params["circles"], self.agent_radius, dist, col, hit)
+        return hit
 
     def _swept(
         self,
@@ -1264,9 +1272,7 @@ class Engine:
             _kernel.run_rows(_kernel.step_rows, B, T, lin, *meas, *self._geometry_args(pos, params), *out)
         hit = self._false(B)
         if flags[:, 1].any():  # an agent was fast: swept checks (lower the clearance in dist, mark crossings)
-            hit = np.zeros(B, dtype=bool)
-            walls = (params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)
-            _kernel.swept_rows(flags, meas[1], pos, *walls, params["circles"], self.agent_radius, dist, nl + 2, hit)
+            hit = self._swept_compiled(flags, meas[1], pos, params, dist, nl + 2)
             hit.setflags(write=False)  # one array type for the kernel
         ok = self._no_success_test if self._fused_success else sc.is_success(dist[:, nl + 1], dist[:, nl])
         rew, gd = np.empty((B, nl)), np.empty((B, nl))

@@ -222,9 +222,8 @@ class FormationVecEnv(VecEnv):
 
     def _draw(self, envs: NDArray[np.int64]) -> tuple[EngineState, NDArray[np.float32]]:
         """New episodes for envs ``envs``, each from its own generator (B = 1 draws, as the single env), and their
-        slot observations (``Engine.reset_each_observed``: from the reset's own measurement)."""
-        state, lobs = self.engine.reset_each_observed([self._rngs[b] for b in envs])
-        return state, self._observe(state, lobs)
+        leaders' observations (``Engine.reset_each_observed``: from the reset's own measurement)."""
+        return self.engine.reset_each_observed([self._rngs[b] for b in envs])
 
     def _slots(self, envs: NDArray[np.int64]) -> NDArray[np.int64]:
         """The slots of envs ``envs``, env by env."""
@@ -237,14 +236,14 @@ class FormationVecEnv(VecEnv):
         With ``draw_ahead`` > 0 they come from the spares; when one of them has none, or ``draw_ahead`` envs
         have none, every env without a spare draws its next episode first, in one batch."""
         if self.draw_ahead == 0:
-            fresh, fresh_obs = self._draw(envs)
+            fresh, lobs = self._draw(envs)
             _scatter(self.state, envs, fresh)
-            obs[self._slots(envs)] = fresh_obs
+            obs[self._slots(envs)] = self._observe(fresh, lobs)
             return
         empty = ~self._has_spare
         if empty[envs].any() or np.count_nonzero(empty) >= self.draw_ahead:
             fill = np.flatnonzero(empty)
-            fresh, fresh_obs = self._draw(fill)
+            fresh, lobs = self._draw(fill)
             if self._spare is None:
                 self._spare, params = _own(self.state)
                 self._spare_obs = np.empty_like(obs)
@@ -254,7 +253,7 @@ class FormationVecEnv(VecEnv):
                 self._spare_rows = {key: v for key, v in rows.items() if v is not None}
                 self._cache_param_rows()
             _scatter(self._spare, fill, fresh)
-            self._spare_obs[self._slots(fill)] = fresh_obs
+            self._spare_obs[self._slots(fill)] = self._observe(fresh, lobs)
             self._has_spare[fill] = True
         self._take_spares(envs, obs)
         self._has_spare[envs] = False
@@ -262,8 +261,8 @@ class FormationVecEnv(VecEnv):
     def _cache_param_rows(self) -> None:
         """The fixed parts of ``_take_spares``' copy: the byte rows of the state's params and of the spares' (both
         owned by the vec env, kept across steps), and the state fields (and obs) it copies."""
-        keys = [f for f in _FIELDS if self.state is not None and getattr(self.state, f) is not None]
-        self._row_keys = tuple(f for f in keys if getattr(self.state, f).size) + ("obs",)
+        arrays = [(f, getattr(self.state, f)) for f in _FIELDS]
+        self._row_keys = tuple(f for f, a in arrays if a is not None and a.size) + ("obs",)
         pairs = [(v, self._spare_rows.get("params." + k)) for k, v in self._param_rows.items()]
         self._param_views = [v for v, src in pairs if src is not None]
         self._param_src = tuple(src for _, src in pairs if src is not None)

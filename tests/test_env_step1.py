@@ -194,11 +194,12 @@ def test_batched_step_is_the_same_on_any_number_of_threads(scenario):
             np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("from_x", [True, False])
 @pytest.mark.parametrize("law", ["dynamic", "dynamic_distributed"])
-def test_linear_rows_has_the_bits_of_the_dense_product(law):
+def test_linear_rows_has_the_bits_of_the_dense_product(law, from_x):
     """``linear_rows`` (Mc's nonzeros over blocks of envs) gives the same bits as the dense product z Mc summed
     row by row in z's order, then gathered by ``_take``; on rows [3, 197) of 200 (blocks cut mid-way), with
-    and without the law's memory."""
+    and without the law's memory, with pos' and vel' copied from x' (``_pv``) and read from the block."""
     if not _kernel.AVAILABLE:
         pytest.skip("numba is not installed")
     eng = Engine("narrow_passage", "double_integrator", law)
@@ -215,7 +216,9 @@ def test_linear_rows_has_the_bits_of_the_dense_product(law):
         np.zeros((B, eng.n, eng.d)),
     ]
     ref_o = np.zeros_like(ref)
-    _kernel.linear_rows(3, 197, x, a, mem, ref, k, *eng._Mc_csc, eng._take, *outs[:2], ref_o, *outs[2:])
+    assert eng._pv.size == 2 * eng.n * eng.d  # the integrators: pos' and vel' are columns of x'
+    pv = eng._pv if from_x else eng._pv[:0]
+    _kernel.linear_rows(3, 197, x, a, mem, ref, k, *eng._Mc_csc, eng._take, pv, *outs[:2], ref_o, *outs[2:])
     z = np.hstack([x, a, mem, ref])[:, : eng._Mc.shape[0]]
     y = np.zeros((B, eng._Mc.shape[1]))
     for i in range(z.shape[1]):  # each column summed from zero in z's order, as a dense loop does
@@ -482,3 +485,28 @@ def test_swept_rows_equal_the_numpy_swept_checks(scenario):
     np.testing.assert_array_equal(hit, want_hit)
     np.testing.assert_allclose(dist[:, eng.n_l + 2], want_clear, rtol=0, atol=1e-12)
     assert want_hit.any() and not want_hit[~flags[:, 1]].any()
+
+
+@pytest.mark.parametrize("B", [9, 300])
+def test_one_root_for_a_shared_threshold_has_the_bits_of_one_root_per_pair(B):
+    """With one threshold row for every env, ``measure_rows`` takes one square root per env for the agent pairs
+    and one for the agent-wall rows (min sqrt(d2) - t = sqrt(min d2) - t); with the same thresholds given per env
+    it takes one per pair and per wall: the results have the same bits (9 envs: a block of its own size)."""
+    if not _kernel.AVAILABLE:
+        pytest.skip("numba is not installed")
+    eng = Engine("narrow_passage")
+    rng = np.random.default_rng(5)
+    st = eng.reset(rng, B)
+    spread = np.linspace(0.0, 2.0, B)[:, None, None]  # from the start pose to agents in contact
+    pos = st.pos + spread * rng.normal(size=st.pos.shape)
+    pos[1, 1] = pos[1, 0]  # a pair in contact
+    pos[2, 0] = st.params["segments"][2, 0, 1]  # an agent on a wall's end
+    params = dict(st.params)
+    shared = eng._measure_compiled(pos, st.vel, st.ref, params)
+    assert eng._thresholds(params).shape[0] == 1
+    params["_thr"] = np.repeat(eng._thresholds(params), B, axis=0)
+    each = eng._measure_compiled(pos, st.vel, st.ref, params)
+    for a, b in zip(shared, each, strict=True):
+        assert np.array_equal(a, b)
+    clear = shared[1][:, eng.n_l + 2]
+    assert clear[1] == -2 * eng.agent_radius and clear[2] == -eng.agent_radius and (clear > 0).any()

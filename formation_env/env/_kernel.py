@@ -237,7 +237,7 @@ def step1(
 
 
 #: Env rows ``measure_rows`` takes at a time, transposed (its loops then run over envs: SIMD).
-MEASURE_BLOCK = 32
+MEASURE_BLOCK = 128
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -328,7 +328,7 @@ def measure_rows(
     nw = rew.shape[1]
     nf = na + 2 * nl
     sqn = np.sqrt(float(n))
-    W = MEASURE_BLOCK
+    W = max(min(MEASURE_BLOCK, b1 - b0), 1)  # the block's buffers (a small batch needs no full ones)
     pt = np.empty((nd, W))  # the block's positions, transposed: row i d + c is p[i, c] of each env
     vt = np.empty((nl * d, W))  # leaders' velocities
     gt = np.empty((2 * nd + 2, W))  # ref
@@ -359,6 +359,15 @@ def measure_rows(
         for j in range(nt):
             for e in range(W):
                 tt[j, e] = thr[0, j]
+    # one threshold t for every pair (or every agent-wall row): min (sqrt(d2) - t) = sqrt(min d2) - t exactly
+    # (sqrt and - t are monotone), so one square root per env instead of one per pair
+    one_pair, one_wall = shared and P > 0, shared and n * S > 0
+    for k in range(1, P):
+        one_pair &= thr[0, k] == thr[0, 0]
+    kw = P + n * C  # the first agent-wall row
+    for k in range(1, n * S):
+        one_wall &= thr[0, kw + k] == thr[0, kw]
+    low = np.empty(W)  # the least squared distance so far (one_pair, one_wall)
     for s0 in range(b0, b1, W):
         m = min(W, b1 - s0)
         # the block, transposed (column by column, ``_rows_t``): then every loop below runs over its envs (SIMD)
@@ -404,6 +413,7 @@ def measure_rows(
             _rows_t(gprev[:, j], s0, m, ft[na + j])
         for e in range(m):
             clear[e] = np.inf
+            low[e] = np.inf
         for k in range(P):  # agent pairs
             i, j = pairs[k, 0], pairs[k, 1]
             for e in range(m):
@@ -413,11 +423,22 @@ def measure_rows(
                 for e in range(m):
                     v = pi[e] - pj[e]
                     acc[e] += v * v
-            tk = tt[k]
+            if one_pair:
+                for e in range(m):
+                    v, lw_ = acc[e], low[e]
+                    low[e] = v if v < lw_ else lw_
+            else:
+                tk = tt[k]
+                for e in range(m):
+                    v = np.sqrt(acc[e]) - tk[e]
+                    cl = clear[e]
+                    clear[e] = v if v < cl else cl
+        if one_pair:
             for e in range(m):
-                v = np.sqrt(acc[e]) - tk[e]
+                v = np.sqrt(low[e]) - thr[0, 0]
                 cl = clear[e]
                 clear[e] = v if v < cl else cl
+                low[e] = np.inf
         for i in range(n):
             for j in range(C):  # agent-circle
                 for e in range(m):
@@ -451,13 +472,26 @@ def measure_rows(
                 if mode == 2 and lead[i] >= 0:
                     r0 = (lead[i] * S + s) * 3
                     lw[r0, :m], lw[r0 + 1, :m], lw[r0 + 2, :m] = wa[:m], wl[:m], wb[:m]
-                for e in range(m):
-                    across, along, back = wa[e], wl[e], wb[e]
-                    ex = along if along > back else back
-                    ex = ex if ex > 0.0 else 0.0
-                    v = np.sqrt(across * across + ex * ex) - tk[e]
-                    cl = clear[e]
-                    clear[e] = v if v < cl else cl
+                if one_wall:
+                    for e in range(m):
+                        across, along, back = wa[e], wl[e], wb[e]
+                        ex = along if along > back else back
+                        ex = ex if ex > 0.0 else 0.0
+                        v, lw_ = across * across + ex * ex, low[e]
+                        low[e] = v if v < lw_ else lw_
+                else:
+                    for e in range(m):
+                        across, along, back = wa[e], wl[e], wb[e]
+                        ex = along if along > back else back
+                        ex = ex if ex > 0.0 else 0.0
+                        v = np.sqrt(across * across + ex * ex) - tk[e]
+                        cl = clear[e]
+                        clear[e] = v if v < cl else cl
+        if one_wall:
+            for e in range(m):
+                v = np.sqrt(low[e]) - thr[0, kw]
+                cl = clear[e]
+                clear[e] = v if v < cl else cl
         for e in range(m):
             worst[e] = -np.inf
             gmax[e] = 0.0
@@ -610,7 +644,7 @@ def measure_rows(
 
 
 #: Env rows ``linear_rows`` takes at a time (its transposed blocks then stay in the L1/L2 cache).
-LINEAR_BLOCK = 64
+LINEAR_BLOCK = 128
 
 
 @njit(cache=True, nogil=True)
@@ -626,6 +660,7 @@ def linear_rows(
     row_of: np.ndarray,
     val: np.ndarray,
     take: np.ndarray,
+    pv: np.ndarray,
     x_o: np.ndarray,
     mem_o: np.ndarray,
     ref_o: np.ndarray,
@@ -649,7 +684,9 @@ def linear_rows(
         none), ref (B, 2 n d + 2) exogenous row, used in z only when Mc has rows for it (more than n q + n_l p +
         n_f p); k (B,) int64: the samples after the step.
         ptr (columns of Mc + 1,) int64, row_of (nnz,) int64, val (nnz,): Mc in CSC form;
-        take (n q + n_f p + 2 n d,) int64: the distinct column of each output.
+        take (n q + n_f p + 2 n d,) int64: the distinct column of each output; pv (2 n d,) int64: the column of
+        x' that each entry of [pos', vel'] equals (then they are gathered from the env's row of x', in the L1
+        cache, which costs half as much as reading the transposed block again), or width 0: from the block.
     Outputs (rows b0..b1-1): x_o (B, n q), mem_o (B, n_f p), pos_o and vel_o (B, n, d) (m, m/s); ref_o: the new
     exogenous row of a fixed goal, ref with k in its last column (B, 2 n d + 2), or width 0: not written.
     """
@@ -664,6 +701,9 @@ def linear_rows(
     zt = np.empty((nx + na + nm + nr, W))
     yt = np.empty((ncol, W))
     c0 = nx + nm
+    nd = n * d
+    po, vo = pos_o.reshape(pos_o.shape[0], nd), vel_o.reshape(vel_o.shape[0], nd)
+    direct = pv.shape[0] == 2 * nd
     for s in range(b0, b1, W):
         m = min(W, b1 - s)
         for e in range(m):  # z of the block, transposed (the actions clipped to [-1, 1])
@@ -690,14 +730,21 @@ def linear_rows(
         last = ref_o.shape[1] - 1  # -1: ref_o has width 0, the goal moves (ref' is made in numpy)
         for e in range(m):
             b = s + e
+            xr, pr, vr = x_o[b], po[b], vo[b]
             for j in range(nx):
-                x_o[b, j] = yt[take[j], e]
+                xr[j] = yt[take[j], e]
             for j in range(nm):
                 mem_o[b, j] = yt[take[nx + j], e]
-            for i in range(n):
-                for c in range(d):
-                    pos_o[b, i, c] = yt[take[c0 + i * d + c], e]
-                    vel_o[b, i, c] = yt[take[c0 + n * d + i * d + c], e]
+            if direct:
+                for j in range(nd):
+                    pr[j] = xr[pv[j]]
+                for j in range(nd):
+                    vr[j] = xr[pv[nd + j]]
+            else:
+                for j in range(nd):
+                    pr[j] = yt[take[c0 + j], e]
+                for j in range(nd):
+                    vr[j] = yt[take[c0 + nd + j], e]
             if last >= 0:  # the new exogenous row of a fixed goal: the old one, k in its last column
                 for j in range(last):
                     ref_o[b, j] = ref[b, j]

@@ -1131,7 +1131,13 @@ class Engine:
             np.ascontiguousarray(v, dtype=t)
             for v, t in ((csc.indptr, np.int64), (csc.indices, np.int64), (csc.data, np.float64))
         )
-        self._take = np.ascontiguousarray(take.reshape(-1), dtype=np.int64)
+        self._take = take = np.ascontiguousarray(take.reshape(-1), dtype=np.int64)
+        # where every entry of [pos', vel'] is a column of x' (the integrators), the kernel copies it from x'
+        nx, first = n * self.q, {}
+        for j in range(nx - 1, -1, -1):
+            first[int(take[j])] = j
+        pv = [first.get(int(c), -1) for c in take[nx + self.mem_dim :]]
+        self._pv = np.array(pv if min(pv) >= 0 else [], dtype=np.int64)
         self._hfit = np.hstack([self.fw.positions, np.ones((n, 1))])
         self._box = np.ascontiguousarray(np.stack(self.bounds).astype(np.float64))
         ks = self.obs_dim - self.L1 - 1
@@ -1261,7 +1267,7 @@ class Engine:
         pos, vel = np.empty((B, n, d)), np.empty((B, n, d))
         mem = np.zeros((B, 0)) if state.memory is None else np.ascontiguousarray(state.memory.reshape(B, -1))
         x = np.ascontiguousarray(state.x.reshape(B, -1))
-        lin = (x, af, mem, ref0, k, *self._Mc_csc, self._take, x_o, mem_o, ref_o)
+        lin = (x, af, mem, ref0, k, *self._Mc_csc, self._take, self._pv, x_o, mem_o, ref_o)
         obs, dist, flags, re = out = self._kernel_outputs(B)
         meas = (pos, np.ascontiguousarray(state.pos), vel, ref, af, np.ascontiguousarray(state.goal_dist))
         T = self.num_threads

@@ -46,6 +46,7 @@ Example::
 from __future__ import annotations
 
 import pickle
+import pickletools
 from collections.abc import Sequence
 from typing import Any
 
@@ -191,9 +192,11 @@ class FormationVecEnv(VecEnv):
             slots = B
         self._per_env = eng.n_l if mode == "shared" else 1
         super().__init__(slots, obs_space, act_space)
-        # a list of `slots` distinct empty dicts, pickled: loading it is the fastest way to make the step's infos
-        # (~50 ns a dict, against ~70 for marshal and ~95 for a list comprehension)
-        self._empty_infos = pickle.dumps([{} for _ in range(slots)], protocol=pickle.HIGHEST_PROTOCOL)
+        # a list of `slots` distinct empty dicts, pickled without its memo entries (``pickletools.optimize``: none is
+        # referred to again): loading it is the fastest way we know to make the step's infos (about 29 ns a dict
+        # with its release, against 33 with the memo, 32 for marshal and 42 for a list comprehension)
+        empty = pickle.dumps([{} for _ in range(slots)], protocol=pickle.HIGHEST_PROTOCOL)
+        self._empty_infos = pickletools.optimize(empty)
         self._next_seed: int | None = seed
         self._rngs: list[np.random.Generator] = []
         self.state: EngineState | None = None

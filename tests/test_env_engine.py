@@ -392,3 +392,20 @@ def test_reset_each_observed_gives_the_observations_of_the_new_episodes(scenario
     np.testing.assert_array_equal(state.pos, want.pos)
     np.testing.assert_array_equal(obs, eng.observe(want))
     assert obs.shape == (5, eng.n_l, eng.obs_dim) and obs.dtype == np.float32
+
+
+@pytest.mark.parametrize("scenario", SCENARIOS)
+def test_single_reset_through_the_compiled_draws_is_the_reference_reset(scenario):
+    """``reset(rng, 1)`` takes ``reset_each([rng])`` where the draws are compiled: the same bits as the episode of
+    the scenario's own ``reset(rng, 1)`` (the numpy reference), and the generator left at the same place."""
+    eng = Engine(scenario)
+    for seed in range(20):
+        g, g_ref = np.random.default_rng(seed), np.random.default_rng(seed)
+        got = eng.reset(g, 1)
+        want = eng._reset_from(dict(eng.scenario.reset(g_ref, 1)))[0]
+        for f in ("x", "pos", "vel", "k", "ref", "goal_dist", "err", "streak"):
+            assert np.array_equal(getattr(got, f), getattr(want, f)), f
+        assert set(got.params) == set(want.params)
+        for key, arr in want.params.items():
+            assert np.array_equal(got.params[key], arr), key
+        assert g.random() == g_ref.random()

@@ -510,3 +510,44 @@ def test_one_root_for_a_shared_threshold_has_the_bits_of_one_root_per_pair(B):
         assert np.array_equal(a, b)
     clear = shared[1][:, eng.n_l + 2]
     assert clear[1] == -2 * eng.agent_radius and clear[2] == -eng.agent_radius and (clear > 0).any()
+
+
+@pytest.mark.parametrize("scenario", ["narrow_passage", "obstacle_field", "hold", "maneuver", "maneuver_3d"])
+def test_step1_global_gives_the_global_state_of_the_next_state(scenario):
+    """``step1_global`` (the compiled step computing the global state in the same call, or ``step`` where the
+    goal moves) returns ``global_state`` of the state it returns, to the bit, and the same step as ``step1``."""
+    eng = Engine(scenario)
+    s = eng.reset(np.random.default_rng(2), 1)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        a = rng.uniform(-1, 1, (eng.n_l, eng.p))
+        new, g, *rest = eng.step1_global(s, a)
+        ref = eng.step1(s, a, observe=False)
+        assert g.dtype == np.float32 and g.shape == (eng.state_dim,)
+        assert np.array_equal(g, eng.global_state(new)[0])
+        assert rest == list(ref[2:]) and np.array_equal(new.x, ref[0].x)
+        s = new
+
+
+@pytest.mark.parametrize("vx", [10.0, 0.05])
+def test_step1_catches_an_agent_tunnelling_through_the_wall(vx):
+    """The team moved (as it is) so that its front agent is 0.15 m before the middle of the wall's lower part, that
+    agent at 10 m/s across the wall: within one sample it lands beyond the wall, and the compiled step1 (its
+    in-call swept check) reports the collision, as the batched step does; at 0.05 m/s neither does."""
+    eng = Engine("narrow_passage", "double_integrator", "dynamic")
+    s = eng.reset(np.random.default_rng(0), 1)
+    seg = s.params["segments"][0, 0]  # the lower wall: (x_w, y_low) to (x_w, y_gap_low)
+    d = eng.d
+    i = int(np.argmax(s.pos[0, :, 0]))  # the front agent
+    x = s.x.copy()
+    x[0, :, :d] += np.array([seg[0, 0] - 0.15, 0.5 * (seg[0, 1] + seg[1, 1])]) - s.pos[0, i]
+    x[0, i, d:] = (vx, 0.0)
+    s = s._replace(x=x, pos=x[..., :d].copy(), vel=x[..., d:].copy())
+    a = np.zeros((eng.n_l, eng.p))
+    one = eng.step1(s, a)
+    ref = eng.step(_batched(s), a[None])
+    assert one[0].pos[0, i, 0] > seg[0, 0] + eng.agent_radius if vx > 1 else one[0].pos[0, i, 0] < seg[0, 0]
+    assert one[5]["collision"] == bool(ref[5]["collision"][0]) == (vx > 1)
+    assert one[3] == bool(ref[3][0]) == (vx > 1)
+    assert not one[5]["out_of_bounds"] and not ref[5]["out_of_bounds"][0]  # the swept check, not the world box
+    np.testing.assert_allclose(one[5]["min_clearance"], ref[5]["min_clearance"][0], rtol=1e-12, atol=1e-12)

@@ -57,6 +57,8 @@ __all__ = [
     "SENSE_CONST",
     "SENSE_GIVEN",
     "SENSE_WALLS",
+    "WANT_GLOBAL",
+    "WANT_OBS",
     "bit_generators",
     "copy_rows",
     "default_threads",
@@ -90,7 +92,12 @@ LAYOUT = (
     "q1",  # g[:q1]: features Q (d per row); g[q1:q1 + 3 n S]: (along - length, -along, 0) per agent and wall
     "walls0",  # index in Q of the first wall row's excess component
     "sense_mode",
+    "pos0",  # out[pos0:pos0 + n d], out[vel0:vel0 + n d], out[ref0:ref0 + 2 n d]: the next positions, velocities, goal
+    "vel0",
+    "ref0",
 )
+#: What ``step1`` computes beyond the step: the leaders' observations, the next state's global state.
+WANT_OBS, WANT_GLOBAL = 1, 2
 
 
 @njit(cache=True)
@@ -111,7 +118,19 @@ def step1(
     lin_hi: np.ndarray,
     err_hi: float,
     lay: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    want: int,
+    theta_map: np.ndarray,
+    pvec: np.ndarray,
+    k: int,
+    inv_cycles: float,
+    state_lo: np.ndarray,
+    state_hi: np.ndarray,
+    prev: np.ndarray,
+    seg_a: np.ndarray,
+    seg_e: np.ndarray,
+    circles: np.ndarray,
+    radius: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One B = 1 step after the checks: z = [x, clip(a), mem, ref], out = z M, g = z M1, then the rest.
 
     Args:
@@ -127,16 +146,27 @@ def step1(
         lin_lo, lin_hi: bounds of the linear observation entries, shape (n_l, L1).
         err_hi: bound of the formation-error entry (m).
         lay: int64 layout, the fields ``LAYOUT``.
+        want: ``WANT_OBS`` | ``WANT_GLOBAL``, what to compute besides the step.
+        theta_map, pvec, k, inv_cycles, state_lo, state_hi: ``global_state``'s arguments for the next state (pvec
+        (kp,) of this episode, k its sample count), used with ``WANT_GLOBAL``.
+        prev (1, n, d): the positions before the step; seg_a, seg_e (1, S, 2): wall starts and vectors (S = 0:
+        none); circles (1, C, d + 1); radius: the agent radius (m). Where a guard trips (``Engine._guarded``),
+        the world box is tested and fast agents' motions get ``swept_rows``' checks.
     Returns:
-        out (C,) = z M; obs (n_l, obs_dim) float32; nv (Kc + n + 1,): contact distances, goal distances
-        (leaders first), formation error; rew (2 n_l,): the reward's and the effort's part linear in
-        [a^2, gprev, goal distances]; scalars [min clearance, max of (nv - thr)[Kc:], min guard margin,
-        bad action flag]. On an action holding NaN or inf the flag is 1 and the arrays are empty.
+        out (C,) = z M; obs (n_l, obs_dim) float32 (empty without ``WANT_OBS``); nv (Kc + n + 1,): contact
+        distances, goal distances (leaders first), formation error; rew (2 n_l,): the reward's and the effort's
+        part linear in [a^2, gprev, goal distances]; scalars [min clearance (lowered by the swept checks), max of
+        (nv - thr)[Kc:], min guard margin, bad action flag, out of the world box, collision (a contact, out of the
+        box or a swept contact)] (flags 0 or 1); the next state's global state (state_dim,) float32, as
+        ``global_state`` makes it (empty without ``WANT_GLOBAL``). On an action holding NaN or inf the flag is 1
+        and the arrays are empty.
     """
     na = a.shape[0]
+    glob = np.empty(0, dtype=np.float32)
     for i in range(na):
         if not np.isfinite(a[i]):
-            return np.empty(0), np.empty((0, 0), dtype=np.float32), np.empty(0), np.empty(0), np.array([0.0, 0, 0, 1])
+            nothing = np.empty(0)
+            return nothing, np.empty((0, 0), dtype=np.float32), nothing, nothing, np.array([0.0, 0, 0, 1, 0, 0]), glob
     nx, nm = x.shape[0], mem.shape[0]
     z = np.empty(nx + na + nm + ref.shape[0])
     z[:nx] = x
@@ -187,9 +217,38 @@ def step1(
     for j in range(guard0, guard1):
         if out[j] < gmin:
             gmin = out[j]
+    collided = clear < 0.0
+    oob = False
+    if gmin < 0.0:  # the rare guards (``Engine._guarded``): the world box, then swept checks of fast agents
+        half = guard0 + (guard1 - guard0) // 2  # the box rows, then the speed rows
+        box, speed = np.inf, np.inf
+        for j in range(guard0, guard1):
+            v = out[j]
+            if j < half:
+                box = v if v < box or v != v else box  # a NaN stays, as in numpy's min
+            else:
+                speed = v if v < speed or v != v else speed
+        oob = box < 0.0
+        if speed < 0.0:
+            n1, p0 = prev.shape[1], lay[15]
+            nxt = np.empty((1, n1, d))
+            for i in range(n1):
+                for c in range(d):
+                    nxt[0, i, c] = out[p0 + i * d + c]
+            one = np.ones((1, 2), dtype=np.bool_)
+            low = np.array([[clear]])
+            hit = np.zeros(1, dtype=np.bool_)
+            swept_rows(one, prev, nxt, seg_a, seg_e, circles, radius, low, 0, hit)
+            clear = low[0, 0]
+            collided |= hit[0]
+        collided |= oob
     err = nv[nrow - 1]
-    obs = np.empty((nl, od), dtype=np.float32)
-    for li in range(nl):
+    if want & WANT_GLOBAL:
+        glob = np.empty(state_lo.shape[0], dtype=np.float32)
+        t = k * inv_cycles
+        _global_row(out, lay[15], out, lay[16], out, lay[17], err, theta_map, pvec, t, state_lo, state_hi, glob)
+    obs = np.empty((nl if want & WANT_OBS else 0, od), dtype=np.float32)
+    for li in range(obs.shape[0]):
         for j in range(L1):
             v = out[obs0 + li * L1 + j]
             lo = lin_lo[li, j]
@@ -233,7 +292,7 @@ def step1(
         if f != 0.0:
             for j in range(w_tail.shape[1]):
                 rew[j] += f * w_tail[i, j]
-    return out, obs, nv, rew, np.array([clear, worst, gmin, 0.0])
+    return out, obs, nv, rew, np.array([clear, worst, gmin, 0.0, 1.0 if oob else 0.0, 1.0 if collided else 0.0]), glob
 
 
 #: Env rows ``measure_rows`` takes at a time, transposed (its loops then run over envs: SIMD).
@@ -996,6 +1055,50 @@ def run_rows(fn: Any, B: int, threads: int, *args: Any) -> None:
         f.result()
 
 
+@njit(cache=True, inline="always")
+def _global_row(
+    ps: np.ndarray,
+    p0: int,
+    vs: np.ndarray,
+    v0: int,
+    rs: np.ndarray,
+    r0: int,
+    err: float,
+    theta_map: np.ndarray,
+    pvec: np.ndarray,
+    t: float,
+    lo: np.ndarray,
+    hi: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """One env's global state into ``out`` (state_dim,) float32: positions ``ps[p0:p0 + n d]``, velocities
+    ``vs[v0:v0 + n d]``, goal and its velocity ``rs[r0:r0 + 2 n d]``, ``err``, Theta (row-major) from the
+    positions by ``theta_map`` (n d, d d), ``pvec`` (kp,), time fraction ``t``; each clipped to [lo, hi] in float64."""
+    nd = theta_map.shape[0]
+    j = 0
+    for i in range(nd):
+        out[j] = min(max(ps[p0 + i], lo[j]), hi[j])
+        j += 1
+    for i in range(nd):
+        out[j] = min(max(vs[v0 + i], lo[j]), hi[j])
+        j += 1
+    for i in range(2 * nd):
+        out[j] = min(max(rs[r0 + i], lo[j]), hi[j])
+        j += 1
+    out[j] = min(max(err, lo[j]), hi[j])
+    j += 1
+    for c in range(theta_map.shape[1]):
+        acc = 0.0
+        for i in range(nd):
+            acc += ps[p0 + i] * theta_map[i, c]
+        out[j] = min(max(acc, lo[j]), hi[j])
+        j += 1
+    for i in range(pvec.shape[0]):
+        out[j] = min(max(pvec[i], lo[j]), hi[j])
+        j += 1
+    out[j] = min(max(t, lo[j]), hi[j])
+
+
 @njit(cache=True)
 def global_state(
     pos: np.ndarray,
@@ -1012,32 +1115,10 @@ def global_state(
     """``Engine.global_state``: [pos, vel, goal, goal velocity, err, Theta, scenario parameters, k / max_cycles]
     per env, clipped to [lo, hi] in float64, as float32 (B, state_dim). pos, vel (B, n d); ref (B, 2 n d + 2);
     err (B,); theta_map (n d, d d): Theta (row-major) from pos; pvec (B, kp); k (B,)."""
-    B, nd = pos.shape
-    dd, kp = theta_map.shape[1], pvec.shape[1]
+    B = pos.shape[0]
     out = np.empty((B, lo.shape[0]), dtype=np.float32)
     for b in range(B):
-        j = 0
-        for i in range(nd):
-            out[b, j] = min(max(pos[b, i], lo[j]), hi[j])
-            j += 1
-        for i in range(nd):
-            out[b, j] = min(max(vel[b, i], lo[j]), hi[j])
-            j += 1
-        for i in range(2 * nd):
-            out[b, j] = min(max(ref[b, i], lo[j]), hi[j])
-            j += 1
-        out[b, j] = min(max(err[b], lo[j]), hi[j])
-        j += 1
-        for t in range(dd):
-            acc = 0.0
-            for i in range(nd):
-                acc += pos[b, i] * theta_map[i, t]
-            out[b, j] = min(max(acc, lo[j]), hi[j])
-            j += 1
-        for i in range(kp):
-            out[b, j] = min(max(pvec[b, i], lo[j]), hi[j])
-            j += 1
-        out[b, j] = min(max(k[b] * inv_cycles, lo[j]), hi[j])
+        _global_row(pos[b], 0, vel[b], 0, ref[b], 0, err[b], theta_map, pvec[b], k[b] * inv_cycles, lo, hi, out[b])
     return out
 
 

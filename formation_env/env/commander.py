@@ -154,9 +154,11 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         p["H"] = H
 
     # ------------------------------------------------------------------ gym API
-    def _obs(self) -> NDArray[np.float32]:
+    def _obs(self, g: NDArray[np.float32] | None = None) -> NDArray[np.float32]:
+        """The observation of the current state; ``g``: its global state, if at hand."""
         assert self._state is not None
-        g = self.engine.global_state(self._state)[0]
+        if g is None:
+            g = self.engine.global_state(self._state)[0]
         if self.action_mode == "leaders":
             return g
         extra = np.concatenate([self._theta()[0].reshape(-1), self._pose["b"][0]]).astype(np.float32)
@@ -181,7 +183,7 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         a = np.asarray(action, dtype=np.float64).reshape(1, -1)
         if a.shape[1] != self._n_act:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {np.shape(action)}")
-        if not math.isfinite(a[0] @ a[0]) and not np.all(np.isfinite(a)):
+        if not math.isfinite(sum(a[0].tolist())) and not np.all(np.isfinite(a)):  # (a finite sum: all finite)
             raise ValueError(f"action holds NaN or inf: {a[0].tolist()}; the state is unchanged")
         if self.action_mode == "leaders":
             leader_a = a.reshape(eng.n_l, eng.p)
@@ -192,7 +194,7 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             self._advance_pose(a)
             after = affine_batch(rl, self._theta(), self._pose["b"])
             leader_a = track_targets(eng, self._state, after, (after - before) / eng.dt)[0]
-        self._state, _, rew, term, trunc, info = eng.step1(self._state, leader_a, observe=False)
+        self._state, glob, rew, term, trunc, info = eng.step1_global(self._state, leader_a)
         out = StepInfo(info)
         out["control_effort"] = sum(info["control_effort"])
         if self.render_mode is not None:  # the trail is drawn only
@@ -200,7 +202,7 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             del self._trail[:-60]
         if self.render_mode == "human":
             self.render()
-        return self._obs(), sum(rew) / len(rew), term, trunc, out
+        return self._obs(glob), sum(rew) / len(rew), term, trunc, out
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:

@@ -643,7 +643,7 @@ class Engine:
             params["_thr"] = thr
         if S:
             params["_W"], params["_R"] = self._wall_maps(seg)
-            params["_a"], params["_e"] = seg[:, :, 0], seg[:, :, 1] - seg[:, :, 0]
+            params["_a"], params["_e"] = np.ascontiguousarray(seg[:, :, 0]), seg[:, :, 1] - seg[:, :, 0]
 
     def _thresholds(self, params: dict[str, Array]) -> Array:
         """The contact and success thresholds (m) of the episodes ``params``: their own ``_thr`` (B, Kc + n + 1)
@@ -734,6 +734,8 @@ class Engine:
         """Draw B new episodes from ``rng``: agents at rest on the scenario's start, law memory empty."""
         if int(B) != B or B < 1:
             raise FormationError(f"batch size B must be a positive integer, got {B}")
+        if B == 1 and self.scenario.compiled_draws:  # the same episode, in fewer calls (~15 us less, narrow passage)
+            return self._reset_each([rng])[0]
         return self._reset_from(dict(self.scenario.reset(rng, int(B))))[0]
 
     def reset_each(self, rngs: list[np.random.Generator]) -> EngineState:
@@ -763,7 +765,7 @@ class Engine:
         k = np.zeros(B, dtype=np.int64)
         ref = self._ref(params, k)
         self._episode_geometry(params)
-        params["_pvec"] = np.asarray(self.scenario.param_vector(params), dtype=np.float64)  # for global_state
+        params["_pvec"] = np.ascontiguousarray(self.scenario.param_vector(params), dtype=np.float64)  # global_state
         if B == 1 and self._fast1:
             self._fold_episode(params, ref)
         for arr in params.values():
@@ -1055,23 +1057,16 @@ class Engine:
         params: dict[str, Array],
         clear: Array,
         collision: NDArray[np.bool_],
-        compiled: bool = False,
     ) -> NDArray[np.bool_]:
         """The rare part of a step whose guard tripped: leaving the world box, and swept (tunnelling) contacts
         of fast agents from ``prev`` to ``pos`` (B, n, d). Updates ``clear`` and ``collision`` (B,) in place;
-        returns out_of_bounds (B,). ``compiled``: the swept checks by ``_kernel.swept_rows`` (the same operations;
-        ``step1``), else in numpy (the reference step)."""
+        returns out_of_bounds (B,). The numpy reference step's (``_kernel.step1`` does the same in its call)."""
         cols = self._cols
         oob = out[:, cols["box"]].min(axis=1) < 0.0
         collision |= oob
         fast = out[:, cols["speed"]].min(axis=1) < 0.0
         if fast.any():
-            if compiled and _kernel.AVAILABLE:
-                flags = np.zeros((fast.shape[0], 2), dtype=bool)
-                flags[:, 1] = fast
-                collision |= self._swept_compiled(flags, prev, pos, params, clear[:, None], 0)
-            else:
-                self._swept(prev, pos, params, clear, collision, fast)
+            self._swept(prev, pos, params, clear, collision, fast)
         return oob
 
     def _swept_compiled(
@@ -1337,6 +1332,9 @@ class Engine:
             "q1": self._q1.shape[1],
             "walls0": self._g["walls"].start,
             "sense_mode": self._bmode,
+            "pos0": cols["pos"].start,
+            "vel0": cols["vel"].start,
+            "ref0": cols["ref"].start,
         }
         self._layout1 = np.array([layout[k] for k in _kernel.LAYOUT], dtype=np.int64)
         self._no_rays = (np.zeros((d + 1, 0)), np.zeros((2, 0)))  # no walls: (wall map, ray map)
@@ -1375,13 +1373,29 @@ class Engine:
         Returns:
             (state', obs (n_l, obs_dim) float32, rewards (n_l floats), terminated, truncated, info) with
             info's values Python scalars (``control_effort`` a list over leaders), as in ``step``; obs is None
-            when ``observe`` is False (a caller that observes ``global_state`` only skips the sensing).
+            when ``observe`` is False (the sensing is skipped).
 
         States from ``reset(rng, 1)`` of static-goal scenarios (n <= ``ALL_PAIRS_UP_TO``, the default success
         test) carry the episode's folded feature map (``_fold_episode``) and take a fast path: one compiled call
         (``_kernel.step1``), since at this size numpy's ~1 us per call would be the whole cost. It equals the
         batched step up to rounding (tests). Other states go through ``step``.
         """
+        return self._step1(state, actions, _kernel.WANT_OBS if observe else 0)
+
+    def step1_global(
+        self, state: EngineState, actions: ArrayLike
+    ) -> tuple[EngineState, NDArray[np.float32], list[float], bool, bool, dict[str, Any]]:
+        """``step1`` that returns the next state's ``global_state`` (state_dim,) float32 in place of the leaders'
+        observations: what a single-agent view of the team needs (``FormationCommander-v0``). On the compiled
+        path the same call computes it (the same bits as ``global_state``, tested)."""
+        new, g, *rest = self._step1(state, actions, _kernel.WANT_GLOBAL)
+        return (new, self.global_state(new)[0] if g is None else g, *rest)  # type: ignore[return-value]
+
+    def _step1(
+        self, state: EngineState, actions: ArrayLike, want: int
+    ) -> tuple[EngineState, NDArray[np.float32] | None, list[float], bool, bool, dict[str, Any]]:
+        """``step1`` with ``want`` (``_kernel.WANT_OBS`` | ``WANT_GLOBAL``): obs is the leaders' observations with
+        WANT_OBS, else the global state where the compiled path made it (WANT_GLOBAL), else None."""
         params = state.params
         m1 = params.get("_M1")
         a = np.array(actions, dtype=np.float64)  # a writable copy: the kernel's argument types stay the same
@@ -1389,13 +1403,15 @@ class Engine:
             new, obs, rew, term, trunc, arrays = self.step(state, a.reshape(1, self.n_l, self.p))
             inf1: dict[str, Any] = {key: val[0].item() for key, val in arrays.items() if key != "control_effort"}
             inf1["control_effort"] = arrays["control_effort"][0].tolist()
-            return new, obs[0], rew[0].tolist(), bool(term[0]), bool(trunc[0]), inf1
+            o1 = obs[0] if want & _kernel.WANT_OBS else None
+            return new, o1, rew[0].tolist(), bool(term[0]), bool(trunc[0]), inf1
         flat = a.reshape(-1)
         if flat.size != self._w_tail.shape[0] - 2 * self.n_l:
             self.check_actions(a if a.ndim == 3 else a[None], 1)  # raises on the shape
         cols, nl, kc, n, d = self._cols, self.n_l, self._kc, self.n, self.d
         walls, rays = (params["_W"][0], params["_R"][0]) if self._bmode == _kernel.SENSE_WALLS else self._no_rays
-        out1, obs, nv, re, sc3 = _kernel.step1(
+        k_i = int(state.k[0]) + 1
+        out1, obs, nv, re, sc3, glob = _kernel.step1(
             state.x.reshape(-1),
             flat,
             self._no_mem if state.memory is None else state.memory.reshape(-1),
@@ -1412,20 +1428,26 @@ class Engine:
             self._lin_hi2,
             self._err_hi,
             self._layout1,
+            want,
+            self._theta_map,
+            params["_pvec"][0],
+            k_i,
+            1.0 / self._max_cycles,
+            self._state_lo64,
+            self._state_hi64,
+            state.pos,
+            *((params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)),
+            params["circles"],
+            self.agent_radius,
         )
         if sc3[3]:
             self.check_actions(a if a.ndim == 3 else a[None], 1)  # raises, naming the leader
         out = out1[None]
-        if observe and self._bmode == _kernel.SENSE_GIVEN:  # circles or 3D: the batched sensing
+        if want & _kernel.WANT_OBS and self._bmode == _kernel.SENSE_GIVEN:  # circles or 3D: the batched sensing
             obs[:, self.L1 + 1 :] = self._sense(out[:, cols["laug"]].reshape(1, nl, d + 1), params)[0]
-        clear_f, worst, gmin, _ = sc3.tolist()
-        collision_f = clear_f < 0.0
+        clear_f, worst, _, _, oob, collided = sc3.tolist()  # the guards (box, swept checks) done by the kernel
+        collision_f, oob_f = collided != 0.0, oob != 0.0
         pos = out[:, cols["pos"]].reshape(1, n, d)
-        oob_f = False
-        if gmin < 0.0:  # left the world box, or an agent was fast: swept checks
-            clear, collision = np.array([clear_f]), np.array([collision_f])
-            oob_f = bool(self._guarded(out, state.pos, pos, params, clear, collision, compiled=True)[0])
-            clear_f, collision_f = float(clear[0]), bool(collision[0])
         nvl = nv.tolist()
         err = nvl[-1]
         sc = self.scenario
@@ -1433,7 +1455,6 @@ class Engine:
         streak_i = int(ok) if sc.hold_steps == 1 else (int(state.streak[0]) + 1) * ok
         success_f = streak_i >= sc.hold_steps
         term_f = collision_f or (success_f and sc.terminate_on_success)
-        k_i = int(state.k[0]) + 1
         ws, wc, wf = self._w_head
         head = success_f * ws + collision_f * wc + err * wf
         rel = re.tolist()
@@ -1451,7 +1472,8 @@ class Engine:
         )
         info = self._info(success_f, collision_f, oob_f, err, clear_f, max(nvl[kc:-1]), rel[nl:], k_i)
         trunc_f = k_i >= self._max_cycles and not term_f
-        return new, obs if observe else None, [r + head for r in rel[:nl]], term_f, trunc_f, info
+        o1 = obs if want & _kernel.WANT_OBS else (glob if want & _kernel.WANT_GLOBAL else None)
+        return new, o1, [r + head for r in rel[:nl]], term_f, trunc_f, info
 
     # ------------------------------------------------------------------ helpers
     def _info(

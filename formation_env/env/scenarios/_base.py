@@ -320,6 +320,12 @@ class Scenario:
             return []
         return list(self._noise_plan.draws)
 
+    @property
+    def compiled_draws(self) -> bool:
+        """Whether :meth:`reset_each` makes every draw in compiled code (numba, a plan without sign draws): then
+        it is also the quicker way to draw one episode, with the numbers of ``reset(rng, 1)`` (tests)."""
+        return _kernel.DRAWS and type(self).draws is not Scenario.draws and self._plan.runs is not None
+
     @functools.cached_property
     def _plan(self) -> DrawPlan:
         """The layout of :meth:`draws` (built once)."""

@@ -180,14 +180,14 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         if self._state is None:
             raise FormationError("call reset() before step()")
         eng = self.engine
-        a = np.asarray(action, dtype=np.float64).reshape(1, -1)
-        if a.shape[1] != self._n_act:
+        if np.size(action) != self._n_act:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {np.shape(action)}")
-        if not math.isfinite(sum(a[0].tolist())) and not np.all(np.isfinite(a)):  # (a finite sum: all finite)
-            raise ValueError(f"action holds NaN or inf: {a[0].tolist()}; the state is unchanged")
-        if self.action_mode == "leaders":
-            leader_a = a.reshape(eng.n_l, eng.p)
+        if self.action_mode == "leaders":  # as it is: step1 converts it once, and refuses NaN or inf naming the leader
+            leader_a = action
         else:
+            a = np.asarray(action, dtype=np.float64).reshape(1, -1)
+            if not math.isfinite(sum(a[0].tolist())) and not np.all(np.isfinite(a)):  # (a finite sum: all finite)
+                raise ValueError(f"action holds NaN or inf: {a[0].tolist()}; the state is unchanged")
             a = np.clip(a, -1.0, 1.0)
             rl = eng.fw.positions[eng.leaders]
             before = affine_batch(rl, self._theta(), self._pose["b"])

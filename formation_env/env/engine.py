@@ -1441,7 +1441,7 @@ class Engine:
             self.agent_radius,
         )
         if sc3[3]:
-            self.check_actions(a if a.ndim == 3 else a[None], 1)  # raises, naming the leader
+            self.check_actions(flat.reshape(1, nl, self.p), 1)  # raises, naming the leader
         out = out1[None]
         if want & _kernel.WANT_OBS and self._bmode == _kernel.SENSE_GIVEN:  # circles or 3D: the batched sensing
             obs[:, self.L1 + 1 :] = self._sense(out[:, cols["laug"]].reshape(1, nl, d + 1), params)[0]

@@ -311,6 +311,32 @@ def _rows_t(col: np.ndarray, s0: int, m: int, row: np.ndarray) -> None:
             row[e] = col[s0 + e]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _clear_rows(d2: np.ndarray, one: bool, low: np.ndarray, tk: np.ndarray, clear: np.ndarray, m: int) -> None:
+    """One contact row of a block: squared distances ``d2[:m]`` lower ``low`` (``one``: every such row has one
+    threshold, rooted once by ``_fold_root``) or lower ``clear`` by sqrt(d2) - ``tk``."""
+    if one:
+        for e in range(m):
+            v, lw = d2[e], low[e]
+            low[e] = v if v < lw else lw
+    else:
+        for e in range(m):
+            v = np.sqrt(d2[e]) - tk[e]
+            cl = clear[e]
+            clear[e] = v if v < cl else cl
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _fold_root(low: np.ndarray, t: float, clear: np.ndarray, m: int) -> None:
+    """``clear[:m]`` lowered by sqrt(``low``) - t (the least of the rows' sqrt(d2) - t, to the bit: both are
+    monotone), and ``low`` reset to inf."""
+    for e in range(m):
+        v = np.sqrt(low[e]) - t
+        cl = clear[e]
+        clear[e] = v if v < cl else cl
+        low[e] = np.inf
+
+
 @njit(cache=True, nogil=True)
 def measure_rows(
     b0: int,
@@ -482,22 +508,9 @@ def measure_rows(
                 for e in range(m):
                     v = pi[e] - pj[e]
                     acc[e] += v * v
-            if one_pair:
-                for e in range(m):
-                    v, lw_ = acc[e], low[e]
-                    low[e] = v if v < lw_ else lw_
-            else:
-                tk = tt[k]
-                for e in range(m):
-                    v = np.sqrt(acc[e]) - tk[e]
-                    cl = clear[e]
-                    clear[e] = v if v < cl else cl
+            _clear_rows(acc, one_pair, low, tt[k], clear, m)
         if one_pair:
-            for e in range(m):
-                v = np.sqrt(low[e]) - thr[0, 0]
-                cl = clear[e]
-                clear[e] = v if v < cl else cl
-                low[e] = np.inf
+            _fold_root(low, thr[0, 0], clear, m)
         for i in range(n):
             for j in range(C):  # agent-circle
                 for e in range(m):
@@ -507,11 +520,7 @@ def measure_rows(
                     for e in range(m):
                         v = pi[e] - cj[e]
                         acc[e] += v * v
-                tk = tt[P + i * C + j]
-                for e in range(m):
-                    v = np.sqrt(acc[e]) - tk[e]
-                    cl = clear[e]
-                    clear[e] = v if v < cl else cl
+                _clear_rows(acc, False, low, tt[P + i * C + j], clear, m)  # (circles' radii: thresholds differ)
             for s in range(S):  # agent-wall: distance across, and excess along the wall (rows of wt, SIMD)
                 tk = tt[P + n * C + i * S + s]
                 o = d * 3 * S
@@ -531,26 +540,14 @@ def measure_rows(
                 if mode == 2 and lead[i] >= 0:
                     r0 = (lead[i] * S + s) * 3
                     lw[r0, :m], lw[r0 + 1, :m], lw[r0 + 2, :m] = wa[:m], wl[:m], wb[:m]
-                if one_wall:
-                    for e in range(m):
-                        across, along, back = wa[e], wl[e], wb[e]
-                        ex = along if along > back else back
-                        ex = ex if ex > 0.0 else 0.0
-                        v, lw_ = across * across + ex * ex, low[e]
-                        low[e] = v if v < lw_ else lw_
-                else:
-                    for e in range(m):
-                        across, along, back = wa[e], wl[e], wb[e]
-                        ex = along if along > back else back
-                        ex = ex if ex > 0.0 else 0.0
-                        v = np.sqrt(across * across + ex * ex) - tk[e]
-                        cl = clear[e]
-                        clear[e] = v if v < cl else cl
+                for e in range(m):  # the squared distance to the wall: across, and the excess along it
+                    across, along, back = wa[e], wl[e], wb[e]
+                    ex = along if along > back else back
+                    ex = ex if ex > 0.0 else 0.0
+                    acc[e] = across * across + ex * ex
+                _clear_rows(acc, one_wall, low, tk, clear, m)
         if one_wall:
-            for e in range(m):
-                v = np.sqrt(low[e]) - thr[0, kw]
-                cl = clear[e]
-                clear[e] = v if v < cl else cl
+            _fold_root(low, thr[0, kw], clear, m)
         for e in range(m):
             worst[e] = -np.inf
             gmax[e] = 0.0
@@ -703,7 +700,7 @@ def measure_rows(
 
 
 #: Env rows ``linear_rows`` takes at a time (its transposed blocks then stay in the L1/L2 cache).
-LINEAR_BLOCK = 128
+LINEAR_BLOCK = 64
 
 
 @njit(cache=True, nogil=True)
@@ -745,7 +742,7 @@ def linear_rows(
         ptr (columns of Mc + 1,) int64, row_of (nnz,) int64, val (nnz,): Mc in CSC form;
         take (n q + n_f p + 2 n d,) int64: the distinct column of each output; pv (2 n d,) int64: the column of
         x' that each entry of [pos', vel'] equals (then they are gathered from the env's row of x', in the L1
-        cache, which costs half as much as reading the transposed block again), or width 0: from the block.
+        cache, instead of from the transposed block again), or width 0: from the block.
     Outputs (rows b0..b1-1): x_o (B, n q), mem_o (B, n_f p), pos_o and vel_o (B, n, d) (m, m/s); ref_o: the new
     exogenous row of a fixed goal, ref with k in its last column (B, 2 n d + 2), or width 0: not written.
     """

@@ -61,6 +61,25 @@ def test_step1_equals_the_batched_step(scenario, dynamics, law):
     assert (used == 90) == expect_fast and (used == 0) == (not expect_fast)
 
 
+def test_step1_follows_a_new_max_cycles():
+    """Setting ``max_cycles`` after construction rebuilds step1's packed constants: it truncates at the new count,
+    and the time entries of its observations and global states are those of the batched step."""
+    eng = Engine("hold", max_cycles=400)
+    eng.max_cycles = 6
+    fast = eng.reset(np.random.default_rng(0), 1)
+    ref = _batched(fast)
+    a = np.zeros((eng.n_l, eng.p))
+    for t in range(6):
+        g1 = eng.step1_global(fast, a)[1]
+        s1, o1, _, te1, tr1, _ = eng.step1(fast, a)
+        s2, o2, _, te2, tr2, _ = eng.step(ref, a[None])
+        assert (te1, tr1) == (bool(te2[0]), bool(tr2[0])) == (False, t == 5)
+        np.testing.assert_allclose(o1, o2[0], rtol=1e-6, atol=1e-6)
+        np.testing.assert_allclose(g1, eng.global_state(s2)[0], rtol=1e-6, atol=1e-6)
+        assert o1[:, eng.obs_blocks["time"]] == pytest.approx((t + 1) / 6)
+        fast, ref = s1, s2
+
+
 def test_step1_without_the_kernel_takes_the_batched_step(monkeypatch):
     monkeypatch.setattr(_kernel, "AVAILABLE", False)
     eng = Engine("narrow_passage", max_cycles=30)

@@ -64,6 +64,7 @@ __all__ = [
     "default_threads",
     "draw_runs",
     "linear_rows",
+    "measure1",
     "measure_rows",
     "native_threads",
     "run_rows",
@@ -75,7 +76,8 @@ __all__ = [
 
 #: How ``step1`` gets the leaders' obstacle sensing: a constant, the given array, or 2D rays on walls.
 SENSE_CONST, SENSE_GIVEN, SENSE_WALLS = 0, 1, 2
-#: Names of the int64 layout vector ``step1`` takes (offsets into ``out`` and ``g``, sizes).
+#: Names of the int64 layout vector ``step1`` takes: sizes, offsets into ``out`` = z M and ``g`` = z M1, and offsets
+#: into its packed arrays ``c1`` (the engine's constants) and ``ep`` (the episode's arrays, ``Engine._fold_episode``).
 LAYOUT = (
     "kc",  # contact rows (pairs, circles, walls)
     "kd",  # rows before the affine residual (contacts, then goal deltas)
@@ -89,110 +91,97 @@ LAYOUT = (
     "guard1",
     "obs0",  # out[obs0:obs0 + nl L1]: the linear observation entries, leader-major
     "laug0",  # out[laug0:laug0 + nl (d + 1)]: each leader's [p, 1]
-    "q1",  # g[:q1]: features Q (d per row); g[q1:q1 + 3 n S]: (along - length, -along, 0) per agent and wall
-    "walls0",  # index in Q of the first wall row's excess component
+    "q1",  # features Q (d per row: contacts, goal deltas, the affine residual) = [pos, 1] G0 + the episode's offsets
+    "walls0",  # index in Q of the first wall row's excess component (then its across component)
+    "circ0",  # index in Q of the first agent-circle row (p_i - c_j)
+    "delta0",  # index in Q of the first goal row (x_i* - p_i, leaders first: the agents in the order lay[perm0:])
+    "perm0",  # lay[perm0:perm0 + n]: the agents, leaders first
     "sense_mode",
-    "pos0",  # out[pos0:pos0 + n d], out[vel0:vel0 + n d], out[ref0:ref0 + 2 n d]: the next positions, velocities, goal
+    "pos0",  # out[pos0:pos0 + n d], out[vel0:vel0 + n d], out[ref0:ref0 + 2 n d + 2]: next positions, velocities, ref
     "vel0",
     "ref0",
+    "x0",  # out[x0:x0 + n q], out[mem0:mem0 + n_f p]: the next agent states and law memory
+    "mem0",
+    "Z",  # rows of M and M1: z = [x (n q), a (n_l p), mem (n_f p), ref (2 n d + 2)]
+    "C",  # columns of M
+    "n_circ",
+    "kp",  # scenario parameters in the global state
+    "c_M",  # c1[c_M:]: M (Z, C); then G0 (n d + 1, q1); the reward map's tail w_tail (n_l p + 2 n_l, 2 n_l), the bounds
+    "c_G",  # of the linear observation entries (n_l, L1) low and high, theta_map (n d, d d), the global state's bounds
+    "c_wt",  # (state_dim) low and high, the constant sensing (n_l, obs_dim - L1 - 1), and the scalars [err_hi,
+    "c_lo",  # 1 / max_cycles, agent radius, reward weights of success, collision, formation error, dt]
+    "c_hi",
+    "c_tm",
+    "c_slo",
+    "c_shi",
+    "c_sense",
+    "c_scal",
+    "e_thr",  # ep[0, e_thr:]: the thresholds (Kc + n + 1); then the wall map (d + 1, 3 S), the ray map (2, S R), the
+    "e_walls",  # scenario parameters (kp), the wall starts and vectors (S, 2) each, the circles (n_circ, d + 1)
+    "e_rays",
+    "e_pvec",
+    "e_a",
+    "e_e",
+    "e_circ",
+    "hold_steps",
+    "terminate_on_success",
+    "max_cycles",
 )
 #: What ``step1`` computes beyond the step: the leaders' observations, the next state's global state.
 WANT_OBS, WANT_GLOBAL = 1, 2
+#: The entries of ``step1``'s ``scal`` output: flags (0 or 1), the info's scalars (m, s), then the leaders' rewards and
+#: their control efforts (n_l each).
+S1_BAD, S1_TERM, S1_TRUNC, S1_SUCCESS, S1_COLLISION, S1_OOB, S1_ERR, S1_CLEAR, S1_GOAL, S1_TIME, S1_REW = range(11)
 
 
-@njit(cache=True)
-def step1(
-    x: np.ndarray,
-    a: np.ndarray,
-    mem: np.ndarray,
-    ref: np.ndarray,
-    M: np.ndarray,
-    M1: np.ndarray,
-    thr: np.ndarray,
-    walls: np.ndarray,
-    rays: np.ndarray,
-    sense_in: np.ndarray,
-    gprev: np.ndarray,
-    w_tail: np.ndarray,
-    lin_lo: np.ndarray,
-    lin_hi: np.ndarray,
-    err_hi: float,
-    lay: np.ndarray,
-    want: int,
-    theta_map: np.ndarray,
-    pvec: np.ndarray,
-    k: int,
-    inv_cycles: float,
-    state_lo: np.ndarray,
-    state_hi: np.ndarray,
-    prev: np.ndarray,
-    seg_a: np.ndarray,
-    seg_e: np.ndarray,
-    circles: np.ndarray,
-    radius: float,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """One B = 1 step after the checks: z = [x, clip(a), mem, ref], out = z M, g = z M1, then the rest.
+@njit(cache=True, inline="always")
+def _geometry1(pos: np.ndarray, rs: np.ndarray, r0: int, c1: np.ndarray, e1: np.ndarray, lay: np.ndarray) -> np.ndarray:
+    """The norms ``nv`` (Kc + n + 1,) of one env's features Q = [pos, 1] G0 + the episode's offsets, as
+    ``Engine._norms(Engine._features(...))``: contact distances, goal distances (leaders first), formation error (m).
 
     Args:
-        x (n q,), a (n_l p,) raw actions, mem (n_f p,) or empty, ref (2 n d + 2,): the state and inputs.
-        M: the folded step (Z, C) (see ``Engine._build_static``); M1: the episode's feature map (Z, C1)
-            (see ``Engine._fold_episode``).
-        thr: contact / goal / formation thresholds (Kc + n + 1,), m.
-        walls: the episode's wall map (d + 1, 3 S): [p, 1] -> (across, along - length, -along) per wall;
-        rays: its ray map (2, S R): G and U per wall and ray (``wall_maps``).
-        sense_in: the sensing when ``sense_mode`` is SENSE_CONST or SENSE_GIVEN, shape (n_l, ks).
-        gprev: the leaders' goal distances before the step (n_l,), m.
-        w_tail: the reward map's rows for [a^2 (n_l p), gprev, goal distances after], shape (., 2 n_l).
-        lin_lo, lin_hi: bounds of the linear observation entries, shape (n_l, L1).
-        err_hi: bound of the formation-error entry (m).
-        lay: int64 layout, the fields ``LAYOUT``.
-        want: ``WANT_OBS`` | ``WANT_GLOBAL``, what to compute besides the step.
-        theta_map, pvec, k, inv_cycles, state_lo, state_hi: ``global_state``'s arguments for the next state (pvec
-        (kp,) of this episode, k its sample count), used with ``WANT_GLOBAL``.
-        prev (1, n, d): the positions before the step; seg_a, seg_e (1, S, 2): wall starts and vectors (S = 0:
-        none); circles (1, C, d + 1); radius: the agent radius (m). Where a guard trips (``Engine._guarded``),
-        the world box is tested and fast agents' motions get ``swept_rows``' checks.
-    Returns:
-        out (C,) = z M; obs (n_l, obs_dim) float32 (empty without ``WANT_OBS``); nv (Kc + n + 1,): contact
-        distances, goal distances (leaders first), formation error; rew (2 n_l,): the reward's and the effort's
-        part linear in [a^2, gprev, goal distances]; scalars [min clearance (lowered by the swept checks), max of
-        (nv - thr)[Kc:], min guard margin, bad action flag, out of the world box, collision (a contact, out of the
-        box or a swept contact)] (flags 0 or 1); the next state's global state (state_dim,) float32, as
-        ``global_state`` makes it (empty without ``WANT_GLOBAL``). On an action holding NaN or inf the flag is 1
-        and the arrays are empty.
+        pos (1, n, d): positions (m); rs[r0:r0 + n d]: the goal positions (agent order); c1, e1: the engine's and the
+        episode's packed arrays, lay: ``step1``'s layout.
     """
-    na = a.shape[0]
-    glob = np.empty(0, dtype=np.float32)
-    for i in range(na):
-        if not np.isfinite(a[i]):
-            nothing = np.empty(0)
-            return nothing, np.empty((0, 0), dtype=np.float32), nothing, nothing, np.array([0.0, 0, 0, 1, 0, 0]), glob
-    nx, nm = x.shape[0], mem.shape[0]
-    z = np.empty(nx + na + nm + ref.shape[0])
-    z[:nx] = x
-    af = np.empty(na)
-    for i in range(na):
-        v = a[i]
-        af[i] = -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
-    z[nx : nx + na] = af
-    z[nx + na : nx + na + nm] = mem
-    z[nx + na + nm :] = ref
-    out = np.dot(z, M)
-    g = np.dot(z, M1)
-    kc, kd, d, nl, S, R = lay[0], lay[1], lay[2], lay[3], lay[4], lay[5]
-    L1, od, guard0, guard1, obs0, laug0 = lay[6], lay[7], lay[8], lay[9], lay[10], lay[11]
-    q1, walls0, mode = lay[12], lay[13], lay[14]
-    ns = (g.shape[0] - q1) // 3
-    for i in range(ns):  # excess along the wall: max(along - length, -along, 0)
-        e = g[q1 + i]
-        b = g[q1 + ns + i]
-        if b > e:
-            e = b
-        if e < 0.0:
-            e = 0.0
-        g[walls0 + d * i] = e
-    nrow = thr.shape[0]
-    nv = np.empty(nrow)
+    kd, d, S, q1, walls0, circ0, delta0, perm0 = lay[1], lay[2], lay[4], lay[12], lay[13], lay[14], lay[15], lay[16]
+    nc, c_G, e_walls, e_circ = lay[25], lay[28], lay[38], lay[43]
+    n = pos.shape[1]
+    nd = n * d
+    G0 = c1[c_G : c_G + (nd + 1) * q1].reshape((nd + 1, q1))
+    g = np.zeros(q1)
+    for i in range(n):  # [pos, 1] G0, row by row
+        for c in range(d):
+            p = pos[0, i, c]
+            for j in range(q1):
+                g[j] += p * G0[i * d + c, j]
+    for j in range(q1):
+        g[j] += G0[nd, j]
+    for i in range(n):  # p_i - c_j
+        for jj in range(nc):
+            for c in range(d):
+                g[circ0 + (i * nc + jj) * d + c] -= e1[e_circ + jj * (d + 1) + c]
+    for kk in range(n):  # x_k* - p_k
+        a = lay[perm0 + kk]
+        for c in range(d):
+            g[delta0 + kk * d + c] += rs[r0 + a * d + c]
+    if S:
+        walls = e1[e_walls : e_walls + (d + 1) * 3 * S].reshape((d + 1, 3 * S))
+        for i in range(n):  # per agent and wall: (excess along it, distance across), from [p_i, 1] W
+            for s in range(S):
+                across, aml, back = 0.0, 0.0, 0.0
+                for c in range(d):
+                    p = pos[0, i, c]
+                    across += p * walls[c, s]
+                    aml += p * walls[c, S + s]
+                    back += p * walls[c, 2 * S + s]
+                across += walls[d, s]
+                aml += walls[d, S + s]
+                back += walls[d, 2 * S + s]
+                e = aml if aml > back else back
+                row = walls0 + (i * S + s) * d
+                g[row] = e if e > 0.0 else 0.0
+                g[row + 1] = across
+    nv = np.empty(kd + 1)
     for r in range(kd):
         acc = 0.0
         for c in range(d):
@@ -202,7 +191,112 @@ def step1(
     acc = 0.0
     for j in range(kd * d, q1):
         acc += g[j] * g[j]
-    nv[nrow - 1] = np.sqrt(acc)
+    nv[kd] = np.sqrt(acc)
+    return nv
+
+
+@njit(cache=True)
+def measure1(pos: np.ndarray, ref: np.ndarray, c1: np.ndarray, ep: np.ndarray, lay: np.ndarray) -> np.ndarray:
+    """``_geometry1``'s norms (Kc + n + 1,) of positions ``pos`` (1, n, d) with the goals of ``ref`` (1, 2 n d + 2):
+    a reset's goal distances and formation error at B = 1."""
+    return _geometry1(pos, ref[0], 0, c1, ep[0], lay)
+
+
+@njit(cache=True)
+def step1(
+    x: np.ndarray,
+    mem: np.ndarray,
+    ref: np.ndarray,
+    prev: np.ndarray,
+    gprev: np.ndarray,
+    k: np.ndarray,
+    streak: np.ndarray,
+    a: np.ndarray,
+    c1: np.ndarray,
+    ep: np.ndarray,
+    lay: np.ndarray,
+    want: int,
+    x2: np.ndarray,
+    mem2: np.ndarray,
+    pos2: np.ndarray,
+    vel2: np.ndarray,
+    ref2: np.ndarray,
+    gd2: np.ndarray,
+    err2: np.ndarray,
+    k2: np.ndarray,
+    streak2: np.ndarray,
+    obs: np.ndarray,
+    glob: np.ndarray,
+    scal: np.ndarray,
+) -> None:
+    """One B = 1 step after the checks: z = [x, clip(a), mem, ref], out = z M, the features of the new positions
+    (``_geometry1``), then the rest, into the given output arrays (allocated by the caller: cheaper than arrays made
+    here and returned).
+
+    Args:
+        x (1, n, q), mem (1, n_f, p) or (1, 0, 0), ref (1, 2 n d + 2), prev (1, n, d) positions (m), gprev (1, n_l)
+            the leaders' goal distances (m), k, streak (1,) int64: the state (``EngineState``'s fields).
+        a (n_l p,): the raw actions.
+        c1: the engine's constants, ep (1, E): the episode's arrays, both packed as ``LAYOUT`` says (see
+            ``Engine._build_fast1``, ``Engine._fold_episode``); lay: the int64 layout, the fields ``LAYOUT``.
+        want: ``WANT_OBS`` | ``WANT_GLOBAL``, what to compute besides the step.
+    Outputs (written):
+        x2, mem2, pos2, vel2, ref2, gd2, err2 (1,), k2, streak2: the next state's fields, shaped as the inputs
+        (velocities as the positions); obs (n_l, obs_dim) float32 with ``WANT_OBS`` (else (0, obs_dim), untouched):
+        the leaders' observations, sensing included except for ``SENSE_GIVEN``; glob (state_dim,) float32 with
+        ``WANT_GLOBAL`` (else (0,)): the next state's global state as ``global_state`` makes it; scal: the entries
+        ``S1_*``: bad action, terminated, truncated, success, collision (a contact, out of the world box, or a
+        swept contact of a fast agent) and out of the box as 0 or 1, formation error, min clearance, goal
+        distance (the largest of any agent, m), time (s), then the rewards and efforts. On an action holding NaN
+        or inf only ``scal[S1_BAD]`` is written (1).
+    Where a guard trips (``Engine._guarded``), the world box is tested and fast agents' motions get ``swept_rows``'
+    checks.
+    """
+    na = a.shape[0]
+    for i in range(na):
+        if not np.isfinite(a[i]):
+            scal[S1_BAD] = 1.0
+            return
+    # the fields of LAYOUT, in its order
+    kc, kd, d, nl, S, R, L1, od, guard0, guard1, obs0, laug0 = (
+        lay[0], lay[1], lay[2], lay[3], lay[4], lay[5], lay[6], lay[7], lay[8], lay[9], lay[10], lay[11],
+    )  # fmt: skip
+    mode, pos0, vel0, ref0, x0, mem0, Z, C, nc, kp = (
+        lay[17], lay[18], lay[19], lay[20], lay[21], lay[22], lay[23], lay[24], lay[25], lay[26],
+    )  # fmt: skip
+    c_M, c_wt, c_lo, c_hi, c_tm, c_slo, c_shi, c_sense, c_scal = (
+        lay[27], lay[29], lay[30], lay[31], lay[32], lay[33], lay[34], lay[35], lay[36],
+    )  # fmt: skip
+    e_walls, e_rays, e_pvec, e_a, e_e, e_circ = lay[38], lay[39], lay[40], lay[41], lay[42], lay[43]
+    hold, tos, max_cycles = lay[44], lay[45], lay[46]
+    n, q, nr = x.shape[1], x.shape[2], ref.shape[1]
+    nx, nmf, nmp = n * q, mem.shape[1], mem.shape[2]
+    nd = n * d
+    e1 = ep[0]
+    z = np.empty(Z)
+    for i in range(n):
+        for c in range(q):
+            z[i * q + c] = x[0, i, c]
+    af = np.empty(na)
+    for i in range(na):
+        v = a[i]
+        af[i] = -1.0 if v < -1.0 else (1.0 if v > 1.0 else v)
+        z[nx + i] = af[i]
+    j = nx + na
+    for i in range(nmf):
+        for c in range(nmp):
+            z[j + i * nmp + c] = mem[0, i, c]
+    j += nmf * nmp
+    for i in range(nr):
+        z[j + i] = ref[0, i]
+    out = np.dot(z, c1[c_M : c_M + Z * C].reshape((Z, C)))
+    for i in range(n):
+        for c in range(d):
+            pos2[0, i, c] = out[pos0 + i * d + c]
+            vel2[0, i, c] = out[vel0 + i * d + c]
+    nv = _geometry1(pos2, out, ref0, c1, e1, lay)
+    nrow = kd + 1
+    thr = e1[lay[37] : lay[37] + nrow]  # e_thr
     clear = np.inf
     for r in range(kc):
         v = nv[r] - thr[r]
@@ -230,69 +324,113 @@ def step1(
                 speed = v if v < speed or v != v else speed
         oob = box < 0.0
         if speed < 0.0:
-            n1, p0 = prev.shape[1], lay[15]
-            nxt = np.empty((1, n1, d))
-            for i in range(n1):
-                for c in range(d):
-                    nxt[0, i, c] = out[p0 + i * d + c]
+            seg_a = e1[e_a : e_a + 2 * S].reshape((1, S, 2))
+            seg_e = e1[e_e : e_e + 2 * S].reshape((1, S, 2))
+            circles = e1[e_circ : e_circ + nc * (d + 1)].reshape((1, nc, d + 1))
             one = np.ones((1, 2), dtype=np.bool_)
             low = np.array([[clear]])
             hit = np.zeros(1, dtype=np.bool_)
-            swept_rows(one, prev, nxt, seg_a, seg_e, circles, radius, low, 0, hit)
+            swept_rows(one, prev, pos2, seg_a, seg_e, circles, c1[c_scal + 2], low, 0, hit)
             clear = low[0, 0]
             collided |= hit[0]
         collided |= oob
     err = nv[nrow - 1]
-    if want & WANT_GLOBAL:
-        glob = np.empty(state_lo.shape[0], dtype=np.float32)
-        t = k * inv_cycles
-        _global_row(out, lay[15], out, lay[16], out, lay[17], err, theta_map, pvec, t, state_lo, state_hi, glob)
-    obs = np.empty((nl if want & WANT_OBS else 0, od), dtype=np.float32)
-    for li in range(obs.shape[0]):
-        for j in range(L1):
-            v = out[obs0 + li * L1 + j]
-            lo = lin_lo[li, j]
-            hi = lin_hi[li, j]
-            if v < lo:
-                v = lo
-            if v > hi:
-                v = hi
-            obs[li, j] = v
-        obs[li, L1] = err if err < err_hi else err_hi
-        if mode == 2:  # 2D rays: T / sensor range of the first hit inside a wall, else 1 (as ``measure_rows``)
-            best = np.ones(R)
-            for s in range(S):
-                across, aml, back = walls[d, s], walls[d, S + s], walls[d, 2 * S + s]
-                for c in range(d):
-                    p = out[laug0 + li * (d + 1) + c]
-                    across += p * walls[c, s]
-                    aml += p * walls[c, S + s]
-                    back += p * walls[c, 2 * S + s]
-                f = -across
-                for r in range(R):
-                    g = rays[0, s * R + r]
-                    t, uf = f * g, rays[1, s * R + r] * f
-                    if g != 0.0 and t >= 0.0 and uf >= back and aml + uf <= 0.0 and t < best[r]:
-                        best[r] = t
-            for r in range(R):
-                obs[li, L1 + 1 + r] = best[r]
-        else:
-            for j in range(od - L1 - 1):
-                obs[li, L1 + 1 + j] = sense_in[li, j]
-    feats = np.empty(na + 2 * nl)
-    for i in range(na):
-        feats[i] = af[i] * af[i]
+    kn = k[0] + 1
+    ok = worst < 0.0 and not collided
+    st = (1 if ok else 0) if hold == 1 else (streak[0] + 1) * (1 if ok else 0)
+    success = st >= hold
+    term = collided or (success and tos != 0)
+    trunc = kn >= max_cycles and not term
+    for i in range(n):
+        for c in range(q):
+            x2[0, i, c] = out[x0 + i * q + c]
+    for i in range(nmf):
+        for c in range(nmp):
+            mem2[0, i, c] = out[mem0 + i * nmp + c]
+    for i in range(nr):
+        ref2[0, i] = out[ref0 + i]
     for li in range(nl):
-        feats[na + li] = gprev[li]
-        feats[na + nl + li] = nv[kc + li]
-    nf = feats.shape[0]
-    rew = np.zeros(w_tail.shape[1])
-    for i in range(nf):
-        f = feats[i]
+        gd2[0, li] = nv[kc + li]
+    err2[0] = err
+    k2[0] = kn
+    streak2[0] = st
+    if want & WANT_GLOBAL:
+        tm = c1[c_tm : c_tm + nd * d * d].reshape((nd, d * d))
+        slo, shi = c1[c_slo:c_shi], c1[c_shi : c_shi + (c_shi - c_slo)]
+        pvec = e1[e_pvec : e_pvec + kp]
+        _global_row(out, pos0, out, vel0, out, ref0, err, tm, pvec, kn * c1[c_scal + 1], slo, shi, glob)
+    if want & WANT_OBS:
+        lin_lo = c1[c_lo : c_lo + nl * L1].reshape((nl, L1))
+        lin_hi = c1[c_hi : c_hi + nl * L1].reshape((nl, L1))
+        err_hi = c1[c_scal]
+        ks = od - L1 - 1
+        sense_in = c1[c_sense : c_sense + nl * ks].reshape((nl, ks))
+        walls = e1[e_walls : e_walls + (d + 1) * 3 * S].reshape((d + 1, 3 * S))
+        rays = e1[e_rays : e_rays + 2 * S * R].reshape((2, S * R))
+        for li in range(nl):
+            for j in range(L1):
+                v = out[obs0 + li * L1 + j]
+                lo = lin_lo[li, j]
+                hi = lin_hi[li, j]
+                if v < lo:
+                    v = lo
+                if v > hi:
+                    v = hi
+                obs[li, j] = v
+            obs[li, L1] = err if err < err_hi else err_hi
+            if mode == 2:  # 2D rays: T / sensor range of the first hit inside a wall, else 1 (as ``measure_rows``)
+                best = np.ones(R)
+                for s in range(S):
+                    across, aml, back = walls[d, s], walls[d, S + s], walls[d, 2 * S + s]
+                    for c in range(d):
+                        p = out[laug0 + li * (d + 1) + c]
+                        across += p * walls[c, s]
+                        aml += p * walls[c, S + s]
+                        back += p * walls[c, 2 * S + s]
+                    f = -across
+                    for r in range(R):
+                        gr = rays[0, s * R + r]
+                        t, uf = f * gr, rays[1, s * R + r] * f
+                        if gr != 0.0 and t >= 0.0 and uf >= back and aml + uf <= 0.0 and t < best[r]:
+                            best[r] = t
+                for r in range(R):
+                    obs[li, L1 + 1 + r] = best[r]
+            else:
+                for j in range(ks):
+                    obs[li, L1 + 1 + j] = sense_in[li, j]
+    nw = 2 * nl
+    w_tail = c1[c_wt : c_wt + (na + nw) * nw].reshape((na + nw, nw))
+    rew = np.zeros(nw)
+    for i in range(na + nw):
+        if i < na:
+            f = af[i] * af[i]
+        elif i < na + nl:
+            f = gprev[0, i - na]
+        else:
+            f = nv[kc + i - na - nl]
         if f != 0.0:
-            for j in range(w_tail.shape[1]):
+            for j in range(nw):
                 rew[j] += f * w_tail[i, j]
-    return out, obs, nv, rew, np.array([clear, worst, gmin, 0.0, 1.0 if oob else 0.0, 1.0 if collided else 0.0]), glob
+    fs = 1.0 if success else 0.0
+    fc = 1.0 if collided else 0.0
+    head = fs * c1[c_scal + 3] + fc * c1[c_scal + 4] + err * c1[c_scal + 5]
+    goal = -np.inf
+    for r in range(kc, nrow - 1):
+        if nv[r] > goal:
+            goal = nv[r]
+    scal[S1_BAD] = 0.0
+    scal[S1_TERM] = 1.0 if term else 0.0
+    scal[S1_TRUNC] = 1.0 if trunc else 0.0
+    scal[S1_SUCCESS] = fs
+    scal[S1_COLLISION] = fc
+    scal[S1_OOB] = 1.0 if oob else 0.0
+    scal[S1_ERR] = err
+    scal[S1_CLEAR] = clear
+    scal[S1_GOAL] = goal
+    scal[S1_TIME] = kn * c1[c_scal + 6]
+    for li in range(nl):
+        scal[S1_REW + li] = rew[li] + head
+        scal[S1_REW + nl + li] = rew[nl + li]
 
 
 #: Env rows ``measure_rows`` takes at a time, transposed (its loops then run over envs: SIMD).

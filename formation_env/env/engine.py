@@ -475,6 +475,7 @@ class Engine:
         self._build_obs_layout()
         if not self.sparse:
             self._build_static()
+            self._build_fast1()  # its packed constants hold M and 1 / max_cycles
 
     def _build_obs_layout(self) -> None:
         """Observation blocks of one leader, and W mapping [pos, vel, ref] (B, 4 n d + 2) to its linear entries."""
@@ -767,11 +768,14 @@ class Engine:
         self._episode_geometry(params)
         params["_pvec"] = np.ascontiguousarray(self.scenario.param_vector(params), dtype=np.float64)  # global_state
         if B == 1 and self._fast1:
-            self._fold_episode(params, ref)
+            self._fold_episode(params)
         for arr in params.values():
             arr.setflags(write=False)
         obs = None
-        if self._kbatch:
+        if B == 1 and self._fast1:  # the goal distances and formation error in one compiled call
+            nv = _kernel.measure1(start, ref, self._c1, params["_M1"], self._layout1)
+            goal_dist, err = nv[None, self._kc : self._kc + self.n_l], nv[-1:]
+        elif self._kbatch:
             obs, dist = self._measure_compiled(start, np.zeros_like(start), ref, params)[:2]
             goal_dist, err = dist[:, : self.n_l], dist[:, self.n_l]
         else:
@@ -1046,7 +1050,7 @@ class Engine:
             streak,
             params,
         )
-        info = self._info(success, collision, oob, err, clear, nv[:, kc:-1].max(axis=1), re[:, nl:], k)
+        info = self._info(success, collision, oob, err, clear, nv[:, kc:-1].max(axis=1), re[:, nl:], k * self.dt)
         return new, obs, re[:, :nl], terminated, truncated, info
 
     def _guarded(
@@ -1296,72 +1300,96 @@ class Engine:
             streak,
             params,
         )
-        info = self._info(success, collision, oob, err, clear, dist[:, nl + 1], re[:, nl:], k)
+        info = self._info(success, collision, oob, err, clear, dist[:, nl + 1], re[:, nl:], k * self.dt)
         return new, obs, rew, terminated, truncated, info
 
     # ------------------------------------------------------------------ the B = 1 step
     def _build_fast1(self) -> None:
-        """Static parts of ``step1``'s compiled path (``_kernel.step1``): the feature map z -> Q of the next
-        positions (wall slots left empty) and the kernel's layout vector."""
+        """Static parts of ``step1``'s compiled path (``_kernel.step1``): the engine's constants packed in one vector
+        ``_c1`` and the kernel's layout vector (``_kernel.LAYOUT``: sizes and offsets, those of the episodes' packed
+        arrays included, then the agents leaders first)."""
         self._fast1 = (
             _kernel.AVAILABLE and self._fused_success and not self.scenario.moving_goal and self.n <= ALL_PAIRS_UP_TO
         )  # else step1 takes the batched step
         if not self._fast1:
             return
         n, d, nl, S = self.n, self.d, self.n_l, self.n_seg
-        cols, M = self._cols, self._M
-        Z = M.shape[0]
-        self._q1 = M[:, cols["pos1"]] @ self._G0  # (Z, F)
-        self._paug1 = M[:, cols["paug"]].reshape(Z, n, d + 1)
-        self._one_row = Z - 2  # z = [x, a, mem, ref] and ref ends with (1, k)
-        self._excess = self._g["walls"].start + d * np.arange(n * S)  # Q's wall rows: (excess, across)
-        self._sense_c = self._sense_fill(1)[0]  # (n_l, ks): the constant sensing, or a dummy
-        layout = {
-            "kc": self._kc,
-            "kd": self._kd,
-            "d": d,
-            "nl": nl,
-            "n_seg": S,
-            "n_rays": self.n_rays,
-            "L1": self.L1,
-            "obs_dim": self.obs_dim,
-            "guard0": cols["guard"].start,
-            "guard1": cols["guard"].stop,
-            "obs0": cols["obs"].start,
-            "laug0": cols["laug"].start,
-            "q1": self._q1.shape[1],
-            "walls0": self._g["walls"].start,
-            "sense_mode": self._bmode,
-            "pos0": cols["pos"].start,
-            "vel0": cols["vel"].start,
-            "ref0": cols["ref"].start,
+        cols, M, sc = self._cols, self._M, self.scenario
+        consts = {  # c1: the engine's constants, in the order of the c_* offsets of LAYOUT
+            "c_M": M,
+            "c_G": self._G0,
+            "c_wt": self._w_tail,
+            "c_lo": self._lin_lo2,
+            "c_hi": self._lin_hi2,
+            "c_tm": self._theta_map,
+            "c_slo": self._state_lo64,
+            "c_shi": self._state_hi64,
+            "c_sense": self._sense_fill(1)[0],  # (n_l, ks): the constant sensing, or a dummy
+            "c_scal": np.array([self._err_hi, 1.0 / self._max_cycles, self.agent_radius, *self._w_head, self.dt]),
         }
-        self._layout1 = np.array([layout[k] for k in _kernel.LAYOUT], dtype=np.int64)
-        self._no_rays = (np.zeros((d + 1, 0)), np.zeros((2, 0)))  # no walls: (wall map, ray map)
-        for arr in self._no_rays:
-            arr.setflags(write=False)  # like the params arrays: numba compiles per read-only flag
-        self._no_mem = np.zeros(0)
+        sizes = {  # ep: the episode's arrays, in the order of the e_* offsets (see _fold_episode)
+            "e_thr": self._thr0.size,
+            "e_walls": (d + 1) * 3 * S,
+            "e_rays": 2 * S * self.n_rays if S else 0,
+            "e_pvec": sc.param_low.size,
+            "e_a": 2 * S,
+            "e_e": 2 * S,
+            "e_circ": self.n_circ * (d + 1),
+        }
+        layout = dict(zip(consts, np.cumsum([0] + [a.size for a in consts.values()])[:-1].tolist(), strict=True))
+        layout.update(zip(sizes, np.cumsum([0, *sizes.values()])[:-1].tolist(), strict=True))
+        self._ep_size = sum(sizes.values())
+        self._c1 = np.concatenate([np.ravel(a) for a in consts.values()])
+        layout.update(
+            kc=self._kc,
+            kd=self._kd,
+            d=d,
+            nl=nl,
+            n_seg=S,
+            n_rays=self.n_rays,
+            L1=self.L1,
+            obs_dim=self.obs_dim,
+            guard0=cols["guard"].start,
+            guard1=cols["guard"].stop,
+            obs0=cols["obs"].start,
+            laug0=cols["laug"].start,
+            q1=self._G0.shape[1],
+            walls0=self._g["walls"].start,
+            circ0=self._g["circles"].start,
+            delta0=self._g["delta"].start,
+            perm0=len(_kernel.LAYOUT),
+            sense_mode=self._bmode,
+            pos0=cols["pos"].start,
+            vel0=cols["vel"].start,
+            ref0=cols["ref"].start,
+            x0=cols["x"].start,
+            mem0=cols["mem"].start,
+            Z=M.shape[0],
+            C=M.shape[1],
+            n_circ=self.n_circ,
+            kp=sc.param_low.size,
+            hold_steps=sc.hold_steps,
+            terminate_on_success=int(sc.terminate_on_success),
+            max_cycles=self._max_cycles,
+        )
+        self._layout1 = np.concatenate([[layout[k] for k in _kernel.LAYOUT], self._perm]).astype(np.int64)
+        # the fixed shapes of step1's outputs, and its dummies (one compiled signature: the same array types always)
+        self._shapes1 = ((1, n, self.q), (1, n, d), (1, 2 * n * d + 2), (1, nl))
+        self._no_mem = np.zeros((1, 0, 0))
+        self._no_obs = np.zeros((0, self.obs_dim), dtype=np.float32)
+        self._no_glob = np.zeros(0, dtype=np.float32)
 
-    def _fold_episode(self, params: dict[str, Array], ref: Array) -> None:
-        """``params["_M1"]`` (1, Z, C1): the episode's feature map at B = 1, so that ``step1`` needs one matmul
-        for all its geometry. From z, its columns give Q (circle centres and the static goals of ``ref``
-        (1, 2 n d + 2) included, wall excess left 0), then per agent and wall (along - length, -along, 0) as a
-        (3, n S) block whose column max is the excess along the wall."""
-        q = self._q1.copy()
-        self._add_offsets(q[self._one_row][None], params["circles"], ref)  # z's constant 1 row
-        blocks = [q]
-        S = self.n_seg
-        if S:
-            Z = q.shape[0]
-            wf = self._paug1 @ params["_W"][0]  # (Z, n, 3 S): across, along - length, -along
-            q[:, self._excess + 1] = wf[:, :, :S].reshape(Z, -1)
-            ex = np.zeros((Z, 3, self.n * S))
-            ex[:, 0] = wf[:, :, S : 2 * S].reshape(Z, -1)
-            ex[:, 1] = wf[:, :, 2 * S :].reshape(Z, -1)
-            blocks.append(ex.reshape(Z, -1))
-        m1 = np.concatenate(blocks, axis=1)[None]
-        m1.setflags(write=False)
-        params["_M1"] = m1
+    def _fold_episode(self, params: dict[str, Array]) -> None:
+        """``params["_M1"]`` (1, E): the episode's arrays for ``step1``, packed in the order of ``LAYOUT``'s e_*
+        offsets: the thresholds, the wall and ray maps, the scenario parameters, the wall starts and vectors, the
+        circles."""
+        parts = [self._thresholds(params), params["_pvec"], params["circles"]]
+        if self.n_seg:
+            parts[1:1] = [params["_W"], params["_R"]]
+            parts[-1:-1] = [params["_a"], params["_e"]]
+        ep = np.concatenate([np.ravel(a) for a in parts])[None]
+        ep.setflags(write=False)
+        params["_M1"] = ep
 
     def step1(
         self, state: EngineState, actions: ArrayLike, observe: bool = True
@@ -1397,89 +1425,78 @@ class Engine:
         """``step1`` with ``want`` (``_kernel.WANT_OBS`` | ``WANT_GLOBAL``): obs is the leaders' observations with
         WANT_OBS, else the global state where the compiled path made it (WANT_GLOBAL), else None."""
         params = state.params
-        m1 = params.get("_M1")
+        ep = params.get("_M1")
         a = np.array(actions, dtype=np.float64)  # a writable copy: the kernel's argument types stay the same
-        if m1 is None or state.x.shape[0] != 1:
+        if ep is None or state.x.shape[0] != 1:
             new, obs, rew, term, trunc, arrays = self.step(state, a.reshape(1, self.n_l, self.p))
             inf1: dict[str, Any] = {key: val[0].item() for key, val in arrays.items() if key != "control_effort"}
             inf1["control_effort"] = arrays["control_effort"][0].tolist()
             o1 = obs[0] if want & _kernel.WANT_OBS else None
             return new, o1, rew[0].tolist(), bool(term[0]), bool(trunc[0]), inf1
         flat = a.reshape(-1)
-        if flat.size != self._w_tail.shape[0] - 2 * self.n_l:
+        nl = self.n_l
+        if flat.size != nl * self.p:
             self.check_actions(a if a.ndim == 3 else a[None], 1)  # raises on the shape
-        cols, nl, kc, n, d = self._cols, self.n_l, self._kc, self.n, self.d
-        walls, rays = (params["_W"][0], params["_R"][0]) if self._bmode == _kernel.SENSE_WALLS else self._no_rays
-        k_i = int(state.k[0]) + 1
-        out1, obs, nv, re, sc3, glob = _kernel.step1(
-            state.x.reshape(-1),
+        sx, sp, sr, sg = self._shapes1
+        mem = state.memory
+        mem2 = self._no_mem if mem is None else np.empty(mem.shape)
+        x2, pos2, vel2, ref2, gd2 = np.empty(sx), np.empty(sp), np.empty(sp), np.empty(sr), np.empty(sg)
+        err2, k2, streak2 = np.empty(1), np.empty(1, dtype=np.int64), np.empty(1, dtype=np.int64)
+        obs = np.empty((nl, self.obs_dim), dtype=np.float32) if want & _kernel.WANT_OBS else self._no_obs
+        glob = np.empty(self.state_dim, dtype=np.float32) if want & _kernel.WANT_GLOBAL else self._no_glob
+        scal = np.empty(_kernel.S1_REW + 2 * nl)
+        _kernel.step1(
+            state.x,
+            self._no_mem if mem is None else mem,
+            state.ref,
+            state.pos,
+            state.goal_dist,
+            state.k,
+            state.streak,
             flat,
-            self._no_mem if state.memory is None else state.memory.reshape(-1),
-            state.ref[0],
-            self._M,
-            params["_M1"][0],
-            self._thresholds(params)[0],
-            walls,
-            rays,
-            self._sense_c,
-            state.goal_dist[0],
-            self._w_tail,
-            self._lin_lo2,
-            self._lin_hi2,
-            self._err_hi,
+            self._c1,
+            ep,
             self._layout1,
             want,
-            self._theta_map,
-            params["_pvec"][0],
-            k_i,
-            1.0 / self._max_cycles,
-            self._state_lo64,
-            self._state_hi64,
-            state.pos,
-            *((params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)),
-            params["circles"],
-            self.agent_radius,
+            x2,
+            mem2,
+            pos2,
+            vel2,
+            ref2,
+            gd2,
+            err2,
+            k2,
+            streak2,
+            obs,
+            glob,
+            scal,
         )
-        if sc3[3]:
+        v = scal.tolist()
+        if v[_kernel.S1_BAD]:
             self.check_actions(flat.reshape(1, nl, self.p), 1)  # raises, naming the leader
-        out = out1[None]
         if want & _kernel.WANT_OBS and self._bmode == _kernel.SENSE_GIVEN:  # circles or 3D: the batched sensing
-            obs[:, self.L1 + 1 :] = self._sense(out[:, cols["laug"]].reshape(1, nl, d + 1), params)[0]
-        clear_f, worst, _, _, oob, collided = sc3.tolist()  # the guards (box, swept checks) done by the kernel
-        collision_f, oob_f = collided != 0.0, oob != 0.0
-        pos = out[:, cols["pos"]].reshape(1, n, d)
-        nvl = nv.tolist()
-        err = nvl[-1]
-        sc = self.scenario
-        ok = worst < 0.0 and not collision_f
-        streak_i = int(ok) if sc.hold_steps == 1 else (int(state.streak[0]) + 1) * ok
-        success_f = streak_i >= sc.hold_steps
-        term_f = collision_f or (success_f and sc.terminate_on_success)
-        ws, wc, wf = self._w_head
-        head = success_f * ws + collision_f * wc + err * wf
-        rel = re.tolist()
-        new = EngineState(
-            out[:, cols["x"]].reshape(1, n, self.q),
-            pos,
-            out[:, cols["vel"]].reshape(1, n, d),
-            out[:, cols["mem"]].reshape(1, self.n_f, self.p) if self.mem_dim else None,
-            np.array([k_i]),
-            out[:, cols["ref"]],
-            nv[None, kc : kc + nl],
-            nv[None, -1],
-            np.array([streak_i]),
-            params,
+            laug = np.concatenate([pos2[:, self.leaders], np.ones((1, nl, 1))], axis=2)
+            obs[:, self.L1 + 1 :] = self._sense(laug, params)[0]
+        new = EngineState(x2, pos2, vel2, None if mem is None else mem2, k2, ref2, gd2, err2, streak2, params)
+        r0 = _kernel.S1_REW
+        info = self._info(
+            v[_kernel.S1_SUCCESS] != 0.0,
+            v[_kernel.S1_COLLISION] != 0.0,
+            v[_kernel.S1_OOB] != 0.0,
+            v[_kernel.S1_ERR],
+            v[_kernel.S1_CLEAR],
+            v[_kernel.S1_GOAL],
+            v[r0 + nl : r0 + 2 * nl],
+            v[_kernel.S1_TIME],
         )
-        info = self._info(success_f, collision_f, oob_f, err, clear_f, max(nvl[kc:-1]), rel[nl:], k_i)
-        trunc_f = k_i >= self._max_cycles and not term_f
         o1 = obs if want & _kernel.WANT_OBS else (glob if want & _kernel.WANT_GLOBAL else None)
-        return new, o1, [r + head for r in rel[:nl]], term_f, trunc_f, info
+        return new, o1, v[r0 : r0 + nl], v[_kernel.S1_TERM] != 0.0, v[_kernel.S1_TRUNC] != 0.0, info
 
     # ------------------------------------------------------------------ helpers
     def _info(
-        self, success: Any, collision: Any, oob: Any, err: Any, clear: Any, goal_distance: Any, effort: Any, k: Any
+        self, success: Any, collision: Any, oob: Any, err: Any, clear: Any, goal_distance: Any, effort: Any, time: Any
     ) -> dict[str, Any]:
-        """A step's info (the keys of ``step``'s docstring), arrays over envs or scalars of one env; k: samples."""
+        """A step's info (the keys of ``step``'s docstring), arrays over envs or scalars of one env; time: k T (s)."""
         return {
             "success": success,
             "collision": collision,
@@ -1488,7 +1505,7 @@ class Engine:
             "min_clearance": clear,
             "goal_distance": goal_distance,
             "control_effort": effort,
-            "time": k * self.dt,
+            "time": time,
         }
 
     def affine_targets(self, state: EngineState) -> Array:

@@ -83,7 +83,7 @@ def test_reset_each_equals_single_resets():
         one = eng.reset(np.random.default_rng(seed), 1)
         for f in ("x", "pos", "vel", "memory", "k", "ref", "goal_dist", "err", "streak"):
             np.testing.assert_allclose(getattr(batch, f)[i], getattr(one, f)[0], rtol=1e-13, atol=1e-13)
-        assert set(one.params) - set(batch.params) == {"_M1"}  # the B = 1 step's folded map
+        assert set(one.params) - set(batch.params) == {"_ep1"}  # the B = 1 step's packed episode arrays
         for key, arr in batch.params.items():
             np.testing.assert_allclose(arr[i], one.params[key][0], rtol=1e-13, atol=1e-13)
 

@@ -17,8 +17,8 @@ from formation_env.env.scenarios import REGISTRY
 
 
 def _batched(state: EngineState) -> EngineState:
-    """The same state without the B = 1 folded map, so that ``step`` takes the batched code."""
-    return state._replace(params={k: v for k, v in state.params.items() if k != "_M1"})
+    """The same state without the B = 1 packed episode arrays, so that ``step`` takes the batched code."""
+    return state._replace(params={k: v for k, v in state.params.items() if k != "_ep1"})
 
 
 def _compare(eng: Engine, seed: int, steps: int) -> int:
@@ -31,7 +31,7 @@ def _compare(eng: Engine, seed: int, steps: int) -> int:
     for t in range(steps):
         scale = 30.0 if t % 7 == 0 else 1.2
         a = rng.uniform(-scale, scale, (1, eng.n_l, eng.p))
-        used += "_M1" in fast.params
+        used += "_ep1" in fast.params
         s1, o1, r1, te1, tr1, i1 = eng.step1(fast, a[0])
         s2, o2, r2, te2, tr2, i2 = eng.step(ref, a)
         np.testing.assert_allclose(o1, o2[0], rtol=1e-6, atol=1e-6)
@@ -84,7 +84,7 @@ def test_step1_without_the_kernel_takes_the_batched_step(monkeypatch):
     monkeypatch.setattr(_kernel, "AVAILABLE", False)
     eng = Engine("narrow_passage", max_cycles=30)
     assert not eng._fast1
-    assert "_M1" not in eng.reset(np.random.default_rng(0), 1).params
+    assert "_ep1" not in eng.reset(np.random.default_rng(0), 1).params
     assert _compare(eng, seed=1, steps=40) == 0
 
 
@@ -186,7 +186,7 @@ def test_compiled_steps_keep_one_signature_each():
             s = eng.reset(np.random.default_rng(0), B)
             for _ in range(3):
                 s = eng.step(s, np.full((B, eng.n_l, eng.p), 0.2))[0]
-            sub = eng.select(s, [0])  # a sub-batch of one, without the folded map
+            sub = eng.select(s, [0])  # a sub-batch of one, without the packed episode arrays
             eng.step(sub, np.zeros((1, eng.n_l, eng.p)))
     for kernel in (_kernel.step1, _kernel.step_rows, _kernel.linear_rows, _kernel.measure_rows):
         assert len(kernel.signatures) == 1, kernel

@@ -1,11 +1,15 @@
 """The engine's steps compiled (numba): the single-env step ``step1`` and the batched step's rows.
 
 At B = 1 and n = 5 a numpy step is ~35 calls of ~1-2 us each, so the call overhead, not the
-arithmetic, is the cost. ``step1`` does the whole step in one call: the two matmuls, wall
-excess, feature norms, contact clearance, success test, world-box guard, 2D ray sensing of
-walls, observation assembly (clipped, float32) and the reward's linear part. It computes exactly
-what the batched numpy step (``Engine.step``) computes, which stays the reference: tests compare
-the two on every scenario. Without numba (``AVAILABLE`` False) ``step1`` takes the batched step.
+arithmetic, is the cost. ``step1`` does the whole step in one call: the folded matmul z M, the
+features [pos, 1] G0 of the new positions with the episode's offsets, wall distances, feature
+norms, contact clearance, success test, world-box guard, swept checks, 2D ray sensing of walls,
+observation assembly (clipped, float32), global state, episode end and rewards. Its arguments are
+few (the engine's constants and the episode's arrays each packed in one vector) and its outputs are
+allocated by the caller, since at this size numba's cost per argument and per returned array (which it
+allocates and boxes) weighs as much as the arithmetic. It computes what the batched numpy step (``Engine.step``)
+computes, which stays the reference: tests compare the two on every scenario. Without numba
+(``AVAILABLE`` False) ``step1`` takes the batched step.
 
 The batched step (``Engine.step`` at B > 1) is ``step_rows`` = ``linear_rows`` (the folded matmul per
 env) then ``measure_rows`` (contacts, rays, observations, rewards), over a range of env rows with
@@ -77,7 +81,7 @@ __all__ = [
 #: How ``step1`` gets the leaders' obstacle sensing: a constant, the given array, or 2D rays on walls.
 SENSE_CONST, SENSE_GIVEN, SENSE_WALLS = 0, 1, 2
 #: Names of the int64 layout vector ``step1`` takes: sizes, offsets into ``out`` = z M and ``g`` = z M1, and offsets
-#: into its packed arrays ``c1`` (the engine's constants) and ``ep`` (the episode's arrays, ``Engine._fold_episode``).
+#: into its packed arrays ``c1`` (the engine's constants) and ``ep`` (the episode's arrays, ``Engine._pack_episode``).
 LAYOUT = (
     "kc",  # contact rows (pairs, circles, walls)
     "kd",  # rows before the affine residual (contacts, then goal deltas)
@@ -238,7 +242,7 @@ def step1(
             the leaders' goal distances (m), k, streak (1,) int64: the state (``EngineState``'s fields).
         a (n_l p,): the raw actions.
         c1: the engine's constants, ep (1, E): the episode's arrays, both packed as ``LAYOUT`` says (see
-            ``Engine._build_fast1``, ``Engine._fold_episode``); lay: the int64 layout, the fields ``LAYOUT``.
+            ``Engine._build_fast1``, ``Engine._pack_episode``); lay: the int64 layout, the fields ``LAYOUT``.
         want: ``WANT_OBS`` | ``WANT_GLOBAL``, what to compute besides the step.
     Outputs (written):
         x2, mem2, pos2, vel2, ref2, gd2, err2 (1,), k2, streak2: the next state's fields, shaped as the inputs

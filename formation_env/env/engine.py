@@ -768,12 +768,12 @@ class Engine:
         self._episode_geometry(params)
         params["_pvec"] = np.ascontiguousarray(self.scenario.param_vector(params), dtype=np.float64)  # global_state
         if B == 1 and self._fast1:
-            self._fold_episode(params)
+            self._pack_episode(params)
         for arr in params.values():
             arr.setflags(write=False)
         obs = None
         if B == 1 and self._fast1:  # the goal distances and formation error in one compiled call
-            nv = _kernel.measure1(start, ref, self._c1, params["_M1"], self._layout1)
+            nv = _kernel.measure1(start, ref, self._c1, params["_ep1"], self._layout1)
             goal_dist, err = nv[None, self._kc : self._kc + self.n_l], nv[-1:]
         elif self._kbatch:
             obs, dist = self._measure_compiled(start, np.zeros_like(start), ref, params)[:2]
@@ -992,7 +992,7 @@ class Engine:
         if self._swarm is not None:
             return self._swarm.step(state, actions)
         B = state.x.shape[0]
-        if B == 1 and "_M1" in state.params:  # the single-env fast path, in arrays
+        if B == 1 and "_ep1" in state.params:  # the single-env fast path, in arrays
             new, obs, rew, term, trunc, inf = self.step1(state, actions)
             info = {key: np.array([val]) for key, val in inf.items()}
             assert obs is not None
@@ -1327,7 +1327,7 @@ class Engine:
             "c_sense": self._sense_fill(1)[0],  # (n_l, ks): the constant sensing, or a dummy
             "c_scal": np.array([self._err_hi, 1.0 / self._max_cycles, self.agent_radius, *self._w_head, self.dt]),
         }
-        sizes = {  # ep: the episode's arrays, in the order of the e_* offsets (see _fold_episode)
+        sizes = {  # ep: the episode's arrays, in the order of the e_* offsets (see _pack_episode)
             "e_thr": self._thr0.size,
             "e_walls": (d + 1) * 3 * S,
             "e_rays": 2 * S * self.n_rays if S else 0,
@@ -1379,8 +1379,8 @@ class Engine:
         self._no_obs = np.zeros((0, self.obs_dim), dtype=np.float32)
         self._no_glob = np.zeros(0, dtype=np.float32)
 
-    def _fold_episode(self, params: dict[str, Array]) -> None:
-        """``params["_M1"]`` (1, E): the episode's arrays for ``step1``, packed in the order of ``LAYOUT``'s e_*
+    def _pack_episode(self, params: dict[str, Array]) -> None:
+        """``params["_ep1"]`` (1, E): the episode's arrays for ``step1``, packed in the order of ``LAYOUT``'s e_*
         offsets: the thresholds, the wall and ray maps, the scenario parameters, the wall starts and vectors, the
         circles."""
         parts = [self._thresholds(params), params["_pvec"], params["circles"]]
@@ -1389,7 +1389,7 @@ class Engine:
             parts[-1:-1] = [params["_a"], params["_e"]]
         ep = np.concatenate([np.ravel(a) for a in parts])[None]
         ep.setflags(write=False)
-        params["_M1"] = ep
+        params["_ep1"] = ep
 
     def step1(
         self, state: EngineState, actions: ArrayLike, observe: bool = True
@@ -1404,7 +1404,7 @@ class Engine:
             when ``observe`` is False (the sensing is skipped).
 
         States from ``reset(rng, 1)`` of static-goal scenarios (n <= ``ALL_PAIRS_UP_TO``, the default success
-        test) carry the episode's folded feature map (``_fold_episode``) and take a fast path: one compiled call
+        test) carry the episode's arrays packed for it (``_pack_episode``) and take a fast path: one compiled call
         (``_kernel.step1``), since at this size numpy's ~1 us per call would be the whole cost. It equals the
         batched step up to rounding (tests). Other states go through ``step``.
         """
@@ -1425,7 +1425,7 @@ class Engine:
         """``step1`` with ``want`` (``_kernel.WANT_OBS`` | ``WANT_GLOBAL``): obs is the leaders' observations with
         WANT_OBS, else the global state where the compiled path made it (WANT_GLOBAL), else None."""
         params = state.params
-        ep = params.get("_M1")
+        ep = params.get("_ep1")
         a = np.array(actions, dtype=np.float64)  # a writable copy: the kernel's argument types stay the same
         if ep is None or state.x.shape[0] != 1:
             new, obs, rew, term, trunc, arrays = self.step(state, a.reshape(1, self.n_l, self.p))
@@ -1537,7 +1537,7 @@ class Engine:
     def concat(states: list[EngineState]) -> EngineState:
         """Join states along the batch dim (e.g. B = 1 resets into one batch), in order."""
         first = states[0]
-        keys = [kk for kk in first.params if kk != "_M1" or len(states) == 1]  # _M1: the B = 1 step's only
+        keys = [kk for kk in first.params if kk != "_ep1" or len(states) == 1]  # _ep1: the B = 1 step's only
         params = {kk: np.concatenate([s.params[kk] for s in states]) for kk in keys}
         for arr in params.values():
             arr.setflags(write=False)

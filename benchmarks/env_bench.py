@@ -20,7 +20,8 @@
   (``OPENBLAS_NUM_THREADS=1`` etc.; torch then defaults to one thread). Env-steps/s = B / step
   time. Target >= 3x.
 * (c) SB3 PPO end to end (``learn``): the commander env (``FormationCommander-v0``) against
-  ``Pendulum-v1`` with the same PPO settings, one env each, alternated. Target >= 0.9x.
+  ``Pendulum-v1`` with the same PPO settings, one env each (and 8 envs each), in a fresh process (see
+  ``bench_ppo``); each comparison on its own, ours and Pendulum in adjacent turns. Target >= 0.9x.
 * (d) Large swarms: core step with a sparse stress at n = 10,000 (< 1 ms), constructive design
   for 10,000 agents (< 10 s), the env on such a framework, and a render of it.
 * (e) Memory: peak RSS of the large cases, each in a fresh subprocess (``VmHWM`` of
@@ -386,15 +387,6 @@ def bench_ppo_here(quick: bool) -> list[Row]:
 
         return go
 
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        for name in makers:  # warm torch and the envs up
-            learn(name, 256)()
-        fns = {name: learn(name) for name in makers}
-        rates = _rates(fns, dict.fromkeys(fns, float(steps)), 1, 4 if quick else 6, warmup=False)
-    finally:
-        torch.set_num_threads(threads)
     labels = {
         "commander": f"PPO on gym.make(FormationCommander-v0) (narrow_passage), 1 env, {steps} timesteps",
         "commander_vec1": "PPO on FormationVecEnv(mode='commander', num_envs=1), same env",
@@ -402,13 +394,19 @@ def bench_ppo_here(quick: bool) -> list[Row]:
         "commander_vec8": "PPO on FormationVecEnv(mode='commander', num_envs=8), n_steps 64",
         "pendulum8": "PPO on make_vec_env(Pendulum-v1, 8), n_steps 64",
     }
-    rows = _compare_rows("c", {k: rates[k] for k in ("commander", "pendulum")}, "commander", "timesteps/s", 0.9, labels)
-    rows += _compare_rows(
-        "c", {k: rates[k] for k in ("commander_vec1", "pendulum")}, "commander_vec1", "timesteps/s", 0.9, labels
-    )
-    rows += _compare_rows(
-        "c", {k: rates[k] for k in ("commander_vec8", "pendulum8")}, "commander_vec8", "timesteps/s", 0.9, labels
-    )
+    pairs = [("commander", "pendulum"), ("commander_vec1", "pendulum"), ("commander_vec8", "pendulum8")]
+    rows: list[Row] = []
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        for name in makers:  # warm torch and the envs up
+            learn(name, 256)()
+        for ours, peer in pairs:  # each comparison on its own, ours and the peer in adjacent turns (A B, B A, ...)
+            fns = {ours: learn(ours), peer: learn(peer)}
+            rates = _rates(fns, dict.fromkeys(fns, float(steps)), 1, 4 if quick else 8, warmup=False)
+            rows += _compare_rows("c", rates, ours, "timesteps/s", 0.9, labels)
+    finally:
+        torch.set_num_threads(threads)
     return rows
 
 

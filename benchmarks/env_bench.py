@@ -17,8 +17,8 @@
   so is ours through Gymnasium's vector API (``to_gymnasium()``: infos as arrays, as VMAS gives
   them, where SB3's ``VecEnv`` API needs a dict per slot, 3,072 at B = 1024). Then
   all of (b) again in a subprocess with OpenBLAS, OpenMP and MKL on one thread
-  (``OPENBLAS_NUM_THREADS=1`` etc.; torch then defaults to one thread). Env-steps/s = B / step
-  time. Target >= 3x.
+  (``OPENBLAS_NUM_THREADS=1`` etc.; torch then defaults to one thread). Each comparison runs on its
+  own, ours and the peer in adjacent turns. Env-steps/s = B / step time. Target >= 3x.
 * (c) SB3 PPO end to end (``learn``): the commander env (``FormationCommander-v0``) against
   ``Pendulum-v1`` with the same PPO settings, one env each (and 8 envs each), in a fresh process (see
   ``bench_ppo``); each comparison on its own, ours and Pendulum in adjacent turns. Target >= 0.9x.
@@ -332,22 +332,32 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
         rows.append(
             _skip("b", "VMAS simple_spread / navigation", "vmas not installed (pip install formation-env[bench])")
         )
-    # turns of ~50 ms (at least 10 calls): ours steps ~1 ms, VMAS's 3-agent simple_spread ~2 ms, and each one's
-    # first call after a switch costs 1.5x (measured, benchmarks.vec_profile --switch)
-    rates = _rates(
-        fns, dict.fromkeys(fns, float(B)), 3 if quick else 10, 3 if quick else 7, turn_s=0.02 if quick else 0.05
-    )
+    # each comparison on its own, ours and the peer in adjacent turns (A B, B A, ...: on this shared machine a
+    # turn of all the cases one after another spread the per-repeat ratios over 2-4x); turns of ~50 ms (at least
+    # 10 calls): ours steps ~1 ms, VMAS's 3-agent simple_spread ~2 ms, and each one's first call after a switch
+    # costs 1.5x (measured, benchmarks.vec_profile --switch)
+    calls, repeat, turn_s = (3, 3, 0.02) if quick else (10, 7, 0.05)
+    peers = [k for k in fns if k.startswith("vmas")]
+    runs: list[tuple[str, list[str], float | None, list[dict[str, list[float]]]]] = []
+    for key in resets:  # ours at its default threads against every VMAS case, the others against VMAS n=3
+        if key.endswith("_ahead0"):  # drawing ahead (the default) against not (ratio > 1: ahead faster)
+            ours, mine, target = key.removesuffix("_ahead0"), [key], None
+        else:
+            ours, target = key, 3.0
+            mine = peers if key in ("hold", "narrow_passage") else [k for k in peers if "_n3" in k]
+        pairs = [  # one run per peer (without VMAS, ours alone)
+            _rates({k: fns[k] for k in (ours, *ks)}, dict.fromkeys((ours, *ks), float(B)), calls, repeat, turn_s=turn_s)
+            for ks in ([[k] for k in mine] or [[]])
+        ]
+        runs.append((ours, mine, target, pairs))
     for key, (n_steps, n_resets) in resets.items():
         labels[key] += f", auto-reset: {n_resets / max(n_steps, 1):.1f} envs reset a step)"
-    peers = {k: v for k, v in rates.items() if k.startswith("vmas")}
     out: list[Row] = []
-    for key in resets:  # ours at its default threads against every VMAS case, the others against VMAS n=3
-        mine = peers if key in ("hold", "narrow_passage") else {k: v for k, v in peers.items() if "_n3" in k}
-        if key.endswith("_ahead0"):  # and drawing ahead (the default) against not (ratio > 1: ahead faster)
-            base = key.removesuffix("_ahead0")
-            out += _compare_rows("b", {base: rates[base], key: rates[key]}, base, "env-steps/s", None, labels)[1:]
-            continue
-        out += _compare_rows("b", {key: rates[key], **mine}, key, "env-steps/s", 3.0, labels)
+    for ours, mine, target, pairs in runs:
+        rows_k = [_row("b", labels[ours], "env-steps/s", [x for r in pairs for x in r[ours]])]
+        for k, r in zip(mine, pairs, strict=False):
+            rows_k += _compare_rows("b", {ours: r[ours], k: r[k]}, ours, "env-steps/s", target, labels)[1:]
+        out += rows_k[1:] if target is None else rows_k
     return out + rows
 
 

@@ -413,7 +413,7 @@ def bench_ppo_here(quick: bool) -> list[Row]:
             learn(name, 256)()
         for ours, peer in pairs:  # each comparison on its own, ours and the peer in adjacent turns (A B, B A, ...)
             fns = {ours: learn(ours), peer: learn(peer)}
-            rates = _rates(fns, dict.fromkeys(fns, float(steps)), 1, 4 if quick else 8, warmup=False)
+            rates = _rates(fns, dict.fromkeys(fns, float(steps)), 1, 4 if quick else 12, warmup=False)
             rows += _compare_rows("c", rates, ours, "timesteps/s", 0.9, labels)
     finally:
         torch.set_num_threads(threads)

@@ -708,7 +708,7 @@ def bench_batched_single_blas(quick: bool) -> list[Row]:
 def bench_ppo(quick: bool) -> list[Row]:
     """(c) in a fresh process, as a training run has it: after (b) this process holds about 280k objects (VMAS,
     mpe2, the 1024-env batches), and its garbage collections then cost PPO's loop more on the env that allocates
-    more per step (on 2026-12-01 the commander's ratio was 0.86-0.88x after (b) in one process, 0.92-0.97x alone)."""
+    more per step (``bench_ppo_here`` after ``bench_batched`` in one process shows it)."""
     return _in_subprocess("bench_ppo_here", quick, "c", "PPO")
 
 

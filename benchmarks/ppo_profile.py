@@ -25,12 +25,13 @@ COMMANDER = "formation_env/FormationCommander-v0"
 
 
 def step_times(make: Callable[[], Any], steps: int = 4096) -> dict[str, float]:
-    """Timesteps/s of PPO ``learn`` and the microseconds per timestep spent in the env's step and resets."""
+    """Timesteps/s of PPO ``learn``, the microseconds per timestep spent in the env's step and resets, and the
+    mean episode length."""
     from stable_baselines3 import PPO
 
     env = make()
     inner = env.unwrapped
-    tot = {"step": 0.0, "reset": 0.0, "n": 0}
+    tot = {"step": 0.0, "reset": 0.0, "n": 0, "resets": 0}
     step0, reset0 = inner.step, inner.reset
 
     def step(action: Any) -> Any:
@@ -44,6 +45,7 @@ def step_times(make: Callable[[], Any], steps: int = 4096) -> dict[str, float]:
         t0 = time.perf_counter()
         out = reset0(*args, **kwargs)
         tot["reset"] += time.perf_counter() - t0
+        tot["resets"] += 1
         return out
 
     inner.step, inner.reset = step, reset
@@ -52,7 +54,12 @@ def step_times(make: Callable[[], Any], steps: int = 4096) -> dict[str, float]:
     model.learn(steps)
     wall = time.perf_counter() - t0
     n = max(int(tot["n"]), 1)
-    return {"timesteps/s": steps / wall, "step us": tot["step"] / n * 1e6, "reset us": tot["reset"] / n * 1e6}
+    return {
+        "timesteps/s": steps / wall,
+        "step us": tot["step"] / n * 1e6,
+        "reset us": tot["reset"] / n * 1e6,
+        "steps an episode": n / max(int(tot["resets"]), 1),
+    }
 
 
 def constant_env(like: Any) -> Any:
@@ -91,7 +98,7 @@ def main(argv: list[str]) -> int:
         t = step_times(make)
         print(
             f"{name}: PPO {t['timesteps/s']:.0f} timesteps/s; per timestep, the env's step {t['step us']:.1f} us "
-            f"and its resets {t['reset us']:.1f} us"
+            f"and its resets {t['reset us']:.1f} us ({t['steps an episode']:.0f} steps an episode)"
         )
     spaces = {"commander's spaces": gym.make(COMMANDER), "Pendulum's spaces": gym.make("Pendulum-v1")}
     rates: dict[str, list[float]] = {k: [] for k in spaces}

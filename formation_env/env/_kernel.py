@@ -74,6 +74,7 @@ __all__ = [
     "run_rows",
     "settle_starts",
     "step1",
+    "step_end_rows",
     "step_rows",
     "swept_rows",
 ]
@@ -960,6 +961,24 @@ def step_rows(b0: int, b1: int, linear: tuple[np.ndarray, ...], *measure: Any) -
 
 
 @njit(cache=True, nogil=True)
+def step_end_rows(
+    b0: int, b1: int, linear: tuple[Any, ...], measure: tuple[Any, ...], swept: tuple[Any, ...], end: tuple[Any, ...]
+) -> None:
+    """``step_rows`` and the rest of a batched step for envs b0 <= b < b1, so that it too runs on the step's
+    threads: the swept checks of the envs with a fast agent (``swept_rows``: ``swept`` = its (a, e, circles,
+    radius, col, hit)), then the episode ends (``episode_rows``: ``end`` = its arguments from ``hit`` on; the
+    default success test). ``measure``: ``measure_rows``' arguments from ``pos`` on."""
+    step_rows(b0, b1, linear, *measure)
+    pos, prev, dist, flags = measure[0], measure[1], measure[25], measure[26]
+    a, e, circles, radius, col, hit = swept
+    _swept_range(b0, b1, flags, prev, pos, a, e, circles, radius, dist, col, hit)
+    hit2, ok_in, re, st0, k, hold, eos, mc, ws, wc, wf, rew, ends, err, clear, gd, streak = end
+    _episode_range(
+        b0, b1, dist, flags, hit2, ok_in, re, st0, k, hold, eos, mc, ws, wc, wf, rew, ends, err, clear, gd, streak
+    )
+
+
+@njit(cache=True, nogil=True)
 def episode_rows(
     dist: np.ndarray,
     flags: np.ndarray,
@@ -997,9 +1016,40 @@ def episode_rows(
         err, clear (B,): formation error and clearance (m); gd (B, n_l): leader goal distances (m);
         streak (B,) int64.
     """
-    B, nl = dist.shape[0], gd.shape[1]
+    _episode_range(
+        0, dist.shape[0], dist, flags, hit, ok_in, re, streak_prev, k, hold, end_on_success, max_cycles, ws, wc, wf,
+        rew, ends, err, clear, gd, streak,
+    )  # fmt: skip
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _episode_range(
+    b0: int,
+    b1: int,
+    dist: np.ndarray,
+    flags: np.ndarray,
+    hit: np.ndarray,
+    ok_in: np.ndarray,
+    re: np.ndarray,
+    streak_prev: np.ndarray,
+    k: np.ndarray,
+    hold: int,
+    end_on_success: bool,
+    max_cycles: int,
+    ws: float,
+    wc: float,
+    wf: float,
+    rew: np.ndarray,
+    ends: np.ndarray,
+    err: np.ndarray,
+    clear: np.ndarray,
+    gd: np.ndarray,
+    streak: np.ndarray,
+) -> None:
+    """``episode_rows`` for the envs b0 <= b < b1."""
+    nl = gd.shape[1]
     own = ok_in.shape[0] > 0
-    for b in range(B):
+    for b in range(b0, b1):
         cl, er = dist[b, nl + 2], dist[b, nl]
         oob = flags[b, 0]
         col = (cl < 0.0) | oob | hit[b]
@@ -1040,9 +1090,28 @@ def swept_rows(
         radius: the agent radius (m); dist (B, k): ``measure_rows``' distances, column ``col`` the clearance.
     Outputs: dist[:, col] lowered in place; hit (B,) bool set where a swept contact is found.
     """
-    B, n, d = pos.shape
+    _swept_range(0, pos.shape[0], flags, prev, pos, a, e, circles, radius, dist, col, hit)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _swept_range(
+    b0: int,
+    b1: int,
+    flags: np.ndarray,
+    prev: np.ndarray,
+    pos: np.ndarray,
+    a: np.ndarray,
+    e: np.ndarray,
+    circles: np.ndarray,
+    radius: float,
+    dist: np.ndarray,
+    col: int,
+    hit: np.ndarray,
+) -> None:
+    """``swept_rows`` for the envs b0 <= b < b1."""
+    n, d = pos.shape[1], pos.shape[2]
     S, C = a.shape[1], circles.shape[1]
-    for b in range(B):
+    for b in range(b0, b1):
         if not flags[b, 1]:
             continue
         if d == 2:
@@ -1127,6 +1196,15 @@ def _step_rows_par(B: int, nt: int, linear: tuple[np.ndarray, ...], *measure: An
 
 
 @njit(cache=True, nogil=True, parallel=True)
+def _step_end_rows_par(
+    B: int, nt: int, linear: tuple[Any, ...], measure: tuple[Any, ...], swept: tuple[Any, ...], end: tuple[Any, ...]
+) -> None:
+    """``step_end_rows`` over [0, B) in ``nt`` chunks on numba's native threads."""
+    for t in prange(nt):
+        step_end_rows(B * t // nt, B * (t + 1) // nt, linear, measure, swept, end)
+
+
+@njit(cache=True, nogil=True, parallel=True)
 def _launch(out: np.ndarray) -> None:
     """Starts numba's threading layer (so that ``numba.threading_layer()`` names it)."""
     for t in prange(out.shape[0]):
@@ -1134,7 +1212,12 @@ def _launch(out: np.ndarray) -> None:
 
 
 #: The ``*_rows`` kernels' twins on numba's native threads (``run_rows`` prefers them, see ``native_threads``).
-_PARALLEL: dict[Any, Any] = {linear_rows: _linear_rows_par, measure_rows: _measure_rows_par, step_rows: _step_rows_par}
+_PARALLEL: dict[Any, Any] = {
+    linear_rows: _linear_rows_par,
+    measure_rows: _measure_rows_par,
+    step_rows: _step_rows_par,
+    step_end_rows: _step_end_rows_par,
+}
 #: ``FORMATION_ENV_NATIVE_THREADS=0`` keeps ``run_rows`` on the Python worker threads.
 NATIVE_THREADS = os.environ.get("FORMATION_ENV_NATIVE_THREADS", "1") != "0"
 _NATIVE: dict[str, Any] = {"pid": -1, "ok": False}

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -745,16 +746,21 @@ class Engine:
         (``Scenario.reset_each``), the rest batched."""
         return self._reset_each(rngs)[0]
 
-    def reset_each_observed(self, rngs: list[np.random.Generator]) -> tuple[EngineState, NDArray[np.float32]]:
+    def reset_each_observed(
+        self, rngs: Sequence[np.random.Generator], bits: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
+    ) -> tuple[EngineState, NDArray[np.float32]]:
         """``reset_each`` and the new episodes' observations, ``observe(state)`` (B, n_l, obs_dim) float32, taken
-        from the measurement that the reset makes anyway (the compiled path) instead of a second one."""
-        state, obs = self._reset_each(rngs)
+        from the measurement that the reset makes anyway (the compiled path) instead of a second one. ``bits``: the
+        generators' ``_kernel.bit_generators``, where the caller keeps them (``Scenario.reset_each``)."""
+        state, obs = self._reset_each(rngs, bits)
         return state, (self.observe(state) if obs is None else obs)
 
-    def _reset_each(self, rngs: list[np.random.Generator]) -> tuple[EngineState, NDArray[np.float32] | None]:
+    def _reset_each(
+        self, rngs: Sequence[np.random.Generator], bits: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
+    ) -> tuple[EngineState, NDArray[np.float32] | None]:
         if not rngs:
             raise FormationError("reset_each needs at least one generator")
-        return self._reset_from(dict(self.scenario.reset_each(rngs)))
+        return self._reset_from(dict(self.scenario.reset_each(rngs, bits)))
 
     def _reset_from(self, params: dict[str, Array]) -> tuple[EngineState, NDArray[np.float32] | None]:
         """The episodes of the scenario's draws ``params``, and their observations where the compiled measurement
@@ -1270,22 +1276,31 @@ class Engine:
         obs, dist, flags, re = out = self._kernel_outputs(B)
         meas = (pos, np.ascontiguousarray(state.pos), vel, ref, af, np.ascontiguousarray(state.goal_dist))
         T = self.num_threads
-        if self._bmode == _kernel.SENSE_GIVEN:  # the sensing needs the new positions first
-            _kernel.run_rows(_kernel.linear_rows, B, T, *lin, pos, vel)
-            _kernel.run_rows(_kernel.measure_rows, B, T, *meas, *self._geometry_args(pos, params), *out)
-        else:
-            _kernel.run_rows(_kernel.step_rows, B, T, lin, *meas, *self._geometry_args(pos, params), *out)
-        hit = self._false(B)
-        if flags[:, 1].any():  # an agent was fast: swept checks (lower the clearance in dist, mark crossings)
-            hit = self._swept_compiled(flags, meas[1], pos, params, dist, nl + 2)
-            hit.setflags(write=False)  # one array type for the kernel
-        ok = self._no_success_test if self._fused_success else sc.is_success(dist[:, nl + 1], dist[:, nl])
         rew, gd = np.empty((B, nl)), np.empty((B, nl))
         ends, ec, streak = np.empty((5, B), dtype=np.bool_), np.empty((2, B)), np.empty(B, dtype=np.int64)
         consts = (sc.hold_steps, sc.terminate_on_success, self._max_cycles, *self._w_head)
-        _kernel.episode_rows(
-            dist, flags, hit, np.asarray(ok, dtype=np.bool_), re, state.streak, k, *consts, rew, ends, *ec, gd, streak
-        )
+        if self._bmode != _kernel.SENSE_GIVEN and self._fused_success:  # the whole step in one call, on T threads
+            hit = np.zeros(B, dtype=np.bool_)
+            walls = (params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)
+            swept = (*walls, params["circles"], self.agent_radius, nl + 2, hit)
+            end = (hit, self._no_success_test, re, state.streak, k, *consts, rew, ends, *ec, gd, streak)
+            measure = (*meas, *self._geometry_args(pos, params), *out)
+            _kernel.run_rows(_kernel.step_end_rows, B, T, lin, measure, swept, end)
+        else:
+            if self._bmode == _kernel.SENSE_GIVEN:  # the sensing needs the new positions first
+                _kernel.run_rows(_kernel.linear_rows, B, T, *lin, pos, vel)
+                _kernel.run_rows(_kernel.measure_rows, B, T, *meas, *self._geometry_args(pos, params), *out)
+            else:
+                _kernel.run_rows(_kernel.step_rows, B, T, lin, *meas, *self._geometry_args(pos, params), *out)
+            hit = self._false(B)
+            if flags[:, 1].any():  # an agent was fast: swept checks (lower the clearance in dist, mark crossings)
+                hit = self._swept_compiled(flags, meas[1], pos, params, dist, nl + 2)
+                hit.setflags(write=False)  # one array type for the kernel
+            ok = self._no_success_test if self._fused_success else sc.is_success(dist[:, nl + 1], dist[:, nl])
+            _kernel.episode_rows(
+                dist, flags, hit, np.asarray(ok, dtype=np.bool_), re, state.streak, k, *consts, rew, ends, *ec, gd,
+                streak,
+            )  # fmt: skip
         success, collision, oob, terminated, truncated = ends
         err, clear = ec
         new = EngineState(

@@ -198,7 +198,9 @@ class FormationVecEnv(VecEnv):
         empty = pickle.dumps([{} for _ in range(slots)], protocol=pickle.HIGHEST_PROTOCOL)
         self._empty_infos = pickletools.optimize(empty)
         self._next_seed: int | None = seed
-        self._rngs: list[np.random.Generator] = []
+        self._rngs: tuple[np.random.Generator, ...] = ()  # env b's generator (a tuple: none is replaced alone)
+        self._bits: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None  # their bit generators' addresses
+        self._bits_of: tuple[np.random.Generator, ...] = ()  # the generators those addresses are of
         self.state: EngineState | None = None
         self.draw_ahead = int(draw_ahead)
         self._spare: EngineState | None = None  # the next episode of each env (rows where _has_spare), drawn ahead
@@ -226,7 +228,10 @@ class FormationVecEnv(VecEnv):
     def _draw(self, envs: NDArray[np.int64]) -> tuple[EngineState, NDArray[np.float32]]:
         """New episodes for envs ``envs``, each from its own generator (B = 1 draws, as the single env), and their
         leaders' observations (``Engine.reset_each_observed``: from the reset's own measurement)."""
-        return self.engine.reset_each_observed([self._rngs[b] for b in envs])
+        if self._bits_of is not self._rngs:  # looked up once per set of generators (held here: the addresses stay)
+            self._bits, self._bits_of = _kernel.bit_generators(list(self._rngs)), self._rngs
+        bits = None if self._bits is None else (self._bits[0][envs], self._bits[1])
+        return self.engine.reset_each_observed([self._rngs[b] for b in envs], bits)
 
     def _slots(self, envs: NDArray[np.int64]) -> NDArray[np.int64]:
         """The slots of envs ``envs``, env by env."""
@@ -304,12 +309,12 @@ class FormationVecEnv(VecEnv):
         """Reset every env (with the seed given to :meth:`seed` or the constructor, if any); (num_envs, obs dim)."""
         B = self.n_envs
         if self._next_seed is not None:
-            self._rngs = [np.random.default_rng(self._next_seed + b) for b in range(B)]
+            self._rngs = tuple(np.random.default_rng(self._next_seed + b) for b in range(B))
             self._next_seed = None
             self._has_spare[:] = False  # drawn from the old generators
         elif not self._rngs:
             root = np.random.SeedSequence()
-            self._rngs = [np.random.default_rng(s) for s in root.spawn(B)]
+            self._rngs = tuple(np.random.default_rng(s) for s in root.spawn(B))
         if self._has_spare.any():  # the envs' next episodes, drawn ahead (the same generators go on)
             state, self._param_rows = _own(self._spare)
             need = np.flatnonzero(~self._has_spare)

@@ -255,19 +255,27 @@ class Scenario:
             params["start"] = self._place_start(pose, raw, lambda todo: self._noise_plan.draw(rng, todo.size))
         return params
 
-    def reset_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
+    def reset_each(
+        self,
+        rngs: Sequence[np.random.Generator],
+        bits: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
+    ) -> dict[str, Array]:
         """One episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` (the same draws; the
         geometry runs once for all episodes, so values agree to rounding).
 
         Per generator only the draws run, one call per run of same-kind draws (:class:`DrawPlan`), and
         the followers' redraws one at a time, as ``reset(rngs[b], 1)`` makes them. The generators must be
         distinct objects. A scenario without :meth:`draws` (one that overrides :meth:`reset` only) resets
-        per generator.
+        per generator. ``bits``: ``_kernel.bit_generators(rngs)``, where the caller keeps them (and the generators
+        alive) across calls; else they are looked up here.
         """
         if type(self).draws is Scenario.draws:
             eps = [self.reset(g, 1) for g in rngs]
             return {key: np.concatenate([ep[key] for ep in eps]) for key in eps[0]}
-        bits = _kernel.bit_generators(list(rngs)) if self._plan.runs is not None else None
+        if self._plan.runs is None:
+            bits = None
+        elif bits is None:
+            bits = _kernel.bit_generators(list(rngs))
         raw = self._plan.draw_each(rngs, bits)
         params, pose = self.build(raw)
         if pose is None:

@@ -335,7 +335,7 @@ def step1(
             one = np.ones((1, 2), dtype=np.bool_)
             low = np.array([[clear]])
             hit = np.zeros(1, dtype=np.bool_)
-            swept_rows(one, prev, pos2, seg_a, seg_e, circles, c1[c_scal + 2], low, 0, hit)
+            swept_rows(0, 1, one, prev, pos2, seg_a, seg_e, circles, c1[c_scal + 2], low, 0, hit)
             clear = low[0, 0]
             collided |= hit[0]
         collided |= oob
@@ -971,59 +971,15 @@ def step_end_rows(
     step_rows(b0, b1, linear, *measure)
     pos, prev, dist, flags = measure[0], measure[1], measure[25], measure[26]
     a, e, circles, radius, col, hit = swept
-    _swept_range(b0, b1, flags, prev, pos, a, e, circles, radius, dist, col, hit)
+    swept_rows(b0, b1, flags, prev, pos, a, e, circles, radius, dist, col, hit)
     hit2, ok_in, re, st0, k, hold, eos, mc, ws, wc, wf, rew, ends, err, clear, gd, streak = end
-    _episode_range(
+    episode_rows(
         b0, b1, dist, flags, hit2, ok_in, re, st0, k, hold, eos, mc, ws, wc, wf, rew, ends, err, clear, gd, streak
     )
 
 
 @njit(cache=True, nogil=True)
 def episode_rows(
-    dist: np.ndarray,
-    flags: np.ndarray,
-    hit: np.ndarray,
-    ok_in: np.ndarray,
-    re: np.ndarray,
-    streak_prev: np.ndarray,
-    k: np.ndarray,
-    hold: int,
-    end_on_success: bool,
-    max_cycles: int,
-    ws: float,
-    wc: float,
-    wf: float,
-    rew: np.ndarray,
-    ends: np.ndarray,
-    err: np.ndarray,
-    clear: np.ndarray,
-    gd: np.ndarray,
-    streak: np.ndarray,
-) -> None:
-    """The end of a batched step, per env, after ``measure_rows`` (and the swept checks): contacts, the success
-    streak, episode ends and rewards; the same operations in the same order as ``Engine._step_batch``'s numpy
-    reference (``Engine._episode_end``), so the same bits.
-
-    Args:
-        dist (B, n_l + 4), flags (B, 2) bool, re (B, 2 n_l): ``measure_rows``' outputs (``dist``'s clearance
-        column lowered by the swept checks, if any); hit (B,) bool: swept wall crossings.
-        ok_in: (B,) bool, the scenario's own success test, or (0,): success is ``dist[:, n_l + 3] < 0``.
-        streak_prev (B,) int64: successes in a row before the step; k (B,) int64: samples after it.
-        hold: successes in a row that are a success; end_on_success: a success ends the episode;
-        max_cycles: samples of an episode; ws, wc, wf: reward weights of success, collision, formation error.
-    Outputs:
-        rew (B, n_l): rewards; ends (5, B) bool: success, collision, out of bounds, terminated, truncated;
-        err, clear (B,): formation error and clearance (m); gd (B, n_l): leader goal distances (m);
-        streak (B,) int64.
-    """
-    _episode_range(
-        0, dist.shape[0], dist, flags, hit, ok_in, re, streak_prev, k, hold, end_on_success, max_cycles, ws, wc, wf,
-        rew, ends, err, clear, gd, streak,
-    )  # fmt: skip
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _episode_range(
     b0: int,
     b1: int,
     dist: np.ndarray,
@@ -1046,7 +1002,22 @@ def _episode_range(
     gd: np.ndarray,
     streak: np.ndarray,
 ) -> None:
-    """``episode_rows`` for the envs b0 <= b < b1."""
+    """The end of a batched step for envs b0 <= b < b1, after ``measure_rows`` (and the swept checks): contacts,
+    the success streak, episode ends and rewards; the same operations in the same order as ``Engine._step_batch``'s
+    numpy reference (``Engine._episode_end``), so the same bits.
+
+    Args:
+        dist (B, n_l + 4), flags (B, 2) bool, re (B, 2 n_l): ``measure_rows``' outputs (``dist``'s clearance
+        column lowered by the swept checks, if any); hit (B,) bool: swept wall crossings.
+        ok_in: (B,) bool, the scenario's own success test, or (0,): success is ``dist[:, n_l + 3] < 0``.
+        streak_prev (B,) int64: successes in a row before the step; k (B,) int64: samples after it.
+        hold: successes in a row that are a success; end_on_success: a success ends the episode;
+        max_cycles: samples of an episode; ws, wc, wf: reward weights of success, collision, formation error.
+    Outputs:
+        rew (B, n_l): rewards; ends (5, B) bool: success, collision, out of bounds, terminated, truncated;
+        err, clear (B,): formation error and clearance (m); gd (B, n_l): leader goal distances (m);
+        streak (B,) int64.
+    """
     nl = gd.shape[1]
     own = ok_in.shape[0] > 0
     for b in range(b0, b1):
@@ -1068,33 +1039,6 @@ def _episode_range(
 
 @njit(cache=True, nogil=True)
 def swept_rows(
-    flags: np.ndarray,
-    prev: np.ndarray,
-    pos: np.ndarray,
-    a: np.ndarray,
-    e: np.ndarray,
-    circles: np.ndarray,
-    radius: float,
-    dist: np.ndarray,
-    col: int,
-    hit: np.ndarray,
-) -> None:
-    """``Engine._swept`` compiled, for the envs b with ``flags[b, 1]`` (an agent fast: it could tunnel): a motion
-    prev -> pos that properly crosses a wall (2D; ``geometry.segment_crossings``) marks ``hit[b]``; the swept
-    clearance from the circles (``geometry.circle_clearance``, minus ``radius``) lowers ``dist[b, col]`` and marks
-    ``hit[b]`` when negative. The same operations as the numpy code, per env.
-
-    Args:
-        flags (B, 2) bool: ``measure_rows``' flags; prev, pos (B, n, d): positions before and after (m);
-        a, e (B, S, 2): wall starts and vectors (S = 0: none); circles (B, C, d + 1): centres and radii;
-        radius: the agent radius (m); dist (B, k): ``measure_rows``' distances, column ``col`` the clearance.
-    Outputs: dist[:, col] lowered in place; hit (B,) bool set where a swept contact is found.
-    """
-    _swept_range(0, pos.shape[0], flags, prev, pos, a, e, circles, radius, dist, col, hit)
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _swept_range(
     b0: int,
     b1: int,
     flags: np.ndarray,
@@ -1108,7 +1052,17 @@ def _swept_range(
     col: int,
     hit: np.ndarray,
 ) -> None:
-    """``swept_rows`` for the envs b0 <= b < b1."""
+    """``Engine._swept`` compiled, for the envs b0 <= b < b1 with ``flags[b, 1]`` (an agent fast: it could
+    tunnel): a motion prev -> pos that properly crosses a wall (2D; ``geometry.segment_crossings``) marks
+    ``hit[b]``; the swept clearance from the circles (``geometry.circle_clearance``, minus ``radius``) lowers
+    ``dist[b, col]`` and marks ``hit[b]`` when negative. The same operations as the numpy code, per env.
+
+    Args:
+        flags (B, 2) bool: ``measure_rows``' flags; prev, pos (B, n, d): positions before and after (m);
+        a, e (B, S, 2): wall starts and vectors (S = 0: none); circles (B, C, d + 1): centres and radii;
+        radius: the agent radius (m); dist (B, k): ``measure_rows``' distances, column ``col`` the clearance.
+    Outputs: dist[:, col] lowered in place; hit (B,) bool set where a swept contact is found.
+    """
     n, d = pos.shape[1], pos.shape[2]
     S, C = a.shape[1], circles.shape[1]
     for b in range(b0, b1):

@@ -1087,7 +1087,9 @@ class Engine:
         hit = np.zeros(flags.shape[0], dtype=bool)
         walls = (params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)
         p0, p1 = np.ascontiguousarray(prev), np.ascontiguousarray(pos)
-        _kernel.swept_rows(flags, p0, p1, *walls, params["circles"], self.agent_radius, dist, col, hit)
+        _kernel.swept_rows(
+            0, flags.shape[0], flags, p0, p1, *walls, params["circles"], self.agent_radius, dist, col, hit
+        )
         return hit
 
     def _swept(
@@ -1297,9 +1299,9 @@ class Engine:
                 hit = self._swept_compiled(flags, meas[1], pos, params, dist, nl + 2)
                 hit.setflags(write=False)  # one array type for the kernel
             ok = self._no_success_test if self._fused_success else sc.is_success(dist[:, nl + 1], dist[:, nl])
+            ok_in = np.asarray(ok, dtype=np.bool_)
             _kernel.episode_rows(
-                dist, flags, hit, np.asarray(ok, dtype=np.bool_), re, state.streak, k, *consts, rew, ends, *ec, gd,
-                streak,
+                0, B, dist, flags, hit, ok_in, re, state.streak, k, *consts, rew, ends, *ec, gd, streak
             )  # fmt: skip
         success, collision, oob, terminated, truncated = ends
         err, clear = ec

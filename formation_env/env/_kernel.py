@@ -966,15 +966,15 @@ def step_end_rows(
 ) -> None:
     """``step_rows`` and the rest of a batched step for envs b0 <= b < b1, so that it too runs on the step's
     threads: the swept checks of the envs with a fast agent (``swept_rows``: ``swept`` = its (a, e, circles,
-    radius, col, hit)), then the episode ends (``episode_rows``: ``end`` = its arguments from ``hit`` on; the
+    radius, col, hit)), then the episode ends (``episode_rows``: ``end`` = its arguments after ``hit``; the
     default success test). ``measure``: ``measure_rows``' arguments from ``pos`` on."""
     step_rows(b0, b1, linear, *measure)
     pos, prev, dist, flags = measure[0], measure[1], measure[25], measure[26]
     a, e, circles, radius, col, hit = swept
     swept_rows(b0, b1, flags, prev, pos, a, e, circles, radius, dist, col, hit)
-    hit2, ok_in, re, st0, k, hold, eos, mc, ws, wc, wf, rew, ends, err, clear, gd, streak = end
+    ok_in, re, st0, k, hold, eos, mc, ws, wc, wf, rew, ends, err, clear, gd, streak = end
     episode_rows(
-        b0, b1, dist, flags, hit2, ok_in, re, st0, k, hold, eos, mc, ws, wc, wf, rew, ends, err, clear, gd, streak
+        b0, b1, dist, flags, hit, ok_in, re, st0, k, hold, eos, mc, ws, wc, wf, rew, ends, err, clear, gd, streak
     )
 
 

@@ -1285,7 +1285,7 @@ class Engine:
             hit = np.zeros(B, dtype=np.bool_)
             walls = (params["_a"], params["_e"]) if self.n_seg else (self._no_seg, self._no_seg)
             swept = (*walls, params["circles"], self.agent_radius, nl + 2, hit)
-            end = (hit, self._no_success_test, re, state.streak, k, *consts, rew, ends, *ec, gd, streak)
+            end = (self._no_success_test, re, state.streak, k, *consts, rew, ends, *ec, gd, streak)
             measure = (*meas, *self._geometry_args(pos, params), *out)
             _kernel.run_rows(_kernel.step_end_rows, B, T, lin, measure, swept, end)
         else:
@@ -1355,7 +1355,6 @@ class Engine:
         }
         layout = dict(zip(consts, np.cumsum([0] + [a.size for a in consts.values()])[:-1].tolist(), strict=True))
         layout.update(zip(sizes, np.cumsum([0, *sizes.values()])[:-1].tolist(), strict=True))
-        self._ep_size = sum(sizes.values())
         self._c1 = np.concatenate([np.ravel(a) for a in consts.values()])
         layout.update(
             kc=self._kc,

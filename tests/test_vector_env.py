@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import copy
+import pickle
+
 import numpy as np
 import pytest
 from conftest import crowded_followers
@@ -12,7 +15,13 @@ from formation_env.env.commander import FormationCommanderEnv
 from formation_env.env.engine import Engine
 from formation_env.env.formation import FormationEnv
 from formation_env.env.scenarios import REGISTRY
-from formation_env.env.vector import FormationVecEnv, GymnasiumFormationVecEnv, reset_batch, stack_states
+from formation_env.env.vector import (
+    EMPTY_INFO,
+    FormationVecEnv,
+    GymnasiumFormationVecEnv,
+    reset_batch,
+    stack_states,
+)
 
 TOL = {"rtol": 1e-5, "atol": 1e-5}
 SCENARIOS = sorted(REGISTRY)
@@ -392,6 +401,70 @@ def test_infos_are_fresh_dicts_with_keys_only_where_done():
     assert all(keys <= set(i) for i in infos)
     assert all(i["TimeLimit.truncated"] is True and type(i["success"]) is bool for i in infos)
     assert len({id(i["terminal_observation"]) for i in infos}) == venv.num_envs
+
+
+def test_shared_empty_infos_same_steps_and_finished_infos():
+    """``share_empty_infos=True``: the same observations, rewards, dones and finished slots' infos as the default
+    over many steps and auto-resets; every other slot holds the one read-only ``EMPTY_INFO``."""
+    kw = {"num_envs": 5, "mode": "shared", "seed": 3, "max_cycles": 7}
+    ref, fast = FormationVecEnv("narrow_passage", **kw), FormationVecEnv("narrow_passage", share_empty_infos=True, **kw)
+    np.testing.assert_array_equal(ref.reset(), fast.reset())
+    rng = np.random.default_rng(0)
+    n_done = 0
+    for _ in range(30):
+        act = _actions(rng, (ref.num_envs, ref.p), 1.5)
+        o1, r1, d1, i1 = ref.step(act)
+        o2, r2, d2, i2 = fast.step(act)
+        np.testing.assert_array_equal(o1, o2)
+        np.testing.assert_array_equal(r1, r2)
+        np.testing.assert_array_equal(d1, d2)
+        for s, (a, b) in enumerate(zip(i1, i2, strict=True)):
+            if d1[s]:
+                assert type(b) is dict and b is not EMPTY_INFO and a.keys() == b.keys()
+                np.testing.assert_array_equal(a.pop("terminal_observation"), b.pop("terminal_observation"))
+                assert a == b
+                n_done += 1
+            else:
+                assert a == {} and type(a) is dict and b is EMPTY_INFO
+    assert n_done >= 10
+
+
+def test_shared_empty_info_refuses_writes_and_copies_plain():
+    info = EMPTY_INFO
+    assert isinstance(info, dict) and info == {} and not info and info.get("episode") is None
+    for write in (
+        lambda: info.__setitem__("episode", 1),
+        lambda: info.setdefault("episode", 1),
+        lambda: info.update(episode=1),
+        lambda: info.update({"episode": 1}),
+        lambda: info.__ior__({"episode": 1}),
+    ):
+        with pytest.raises(TypeError, match="share_empty_infos"):
+            write()
+    info.update()  # adds nothing: allowed, as are reads that cannot change it
+    info.clear()
+    assert info.pop("episode", None) is None and info == {}
+    with pytest.raises(KeyError):
+        info.pop("episode")
+    for c in (info.copy(), dict(info), copy.copy(info), copy.deepcopy(info), pickle.loads(pickle.dumps(info))):
+        assert type(c) is dict and c == {}
+        c["episode"] = 1  # a copy is the caller's to write
+    assert info == {}
+    with pytest.raises(FormationError, match="share_empty_infos"):
+        FormationVecEnv("hold", num_envs=2, share_empty_infos=1)
+
+
+def test_sb3_ppo_and_wrappers_run_on_shared_empty_infos():
+    """SB3's PPO through VecMonitor and VecNormalize (which write into finished slots' infos only) runs and logs
+    its episodes with the shared empty infos."""
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+
+    venv = FormationVecEnv("narrow_passage", num_envs=4, mode="shared", max_cycles=8, share_empty_infos=True)
+    env = VecNormalize(VecMonitor(venv))
+    model = PPO("MlpPolicy", env, n_steps=16, batch_size=32, n_epochs=1, seed=0, device="cpu")
+    model.learn(total_timesteps=2 * 16 * venv.num_envs)
+    assert len(model.ep_info_buffer) > 0  # VecMonitor's episode infos reached PPO
 
 
 @pytest.mark.parametrize(("scenario", "kwargs"), RESET_CASES)

@@ -26,7 +26,10 @@ draws of an env still come from its generator in order, so the episodes are the 
 A finished env is reset in the same step (SB3 convention): its slot's
 ``info`` holds ``terminal_observation`` and, for a time-limit cut that is no true end,
 ``TimeLimit.truncated = True`` (SB3 then bootstraps its value). Other slots get empty
-info dicts; the batched engine info of the last step is ``last_info`` (arrays (B,)).
+info dicts, a fresh one each (as SB3's own vec envs give them); with ``share_empty_infos=True`` they
+share one read-only empty dict instead (:data:`EMPTY_INFO`), which saves making and freeing
+B n_l dicts a step (see :class:`FormationVecEnv`). The batched engine info of the last step is
+``last_info`` (arrays (B,)).
 
 Gymnasium: :meth:`FormationVecEnv.to_gymnasium` (or :class:`GymnasiumFormationVecEnv`)
 wraps it as a ``gymnasium.vector.VectorEnv`` with same-step auto-reset
@@ -61,7 +64,7 @@ from formation_env.core.errors import FormationError
 from . import _kernel
 from .engine import Engine, EngineState
 
-__all__ = ["MODES", "FormationVecEnv", "GymnasiumFormationVecEnv", "reset_batch", "stack_states"]
+__all__ = ["EMPTY_INFO", "MODES", "FormationVecEnv", "GymnasiumFormationVecEnv", "reset_batch", "stack_states"]
 
 #: Slot layouts of :class:`FormationVecEnv`.
 MODES: tuple[str, ...] = ("shared", "commander")
@@ -69,6 +72,50 @@ MODES: tuple[str, ...] = ("shared", "commander")
 #: Engine info entries copied into a finished slot's info dict.
 _DONE_INFO = ("success", "collision", "out_of_bounds", "formation_error", "goal_distance", "time")
 _INFO_KEYS = (*_DONE_INFO, "TimeLimit.truncated")
+
+
+class _EmptyInfo(dict[str, Any]):
+    """An empty info dict that refuses to be written: shared by the slots that did not finish a step
+    (``FormationVecEnv(share_empty_infos=True)``). Reads (``get``, ``in``, iteration, ``**info``) are a dict's;
+    a write that would add a key raises TypeError naming the option; copies (``copy``, ``dict(info)``,
+    ``copy.deepcopy``, pickling) are plain writable dicts."""
+
+    __slots__ = ()
+
+    def _refuse(self, what: str) -> TypeError:
+        return TypeError(
+            f"info dict {what}: the slots that did not finish this step share one read-only empty info dict "
+            "(FormationVecEnv(share_empty_infos=True)); copy it first (dict(info)), or make the env with "
+            "share_empty_infos=False for a fresh dict per slot"
+        )
+
+    def __setitem__(self, key: Any, value: Any) -> None:
+        raise self._refuse(f"write of {key!r}")
+
+    def setdefault(self, key: Any, default: Any = None) -> Any:
+        raise self._refuse(f"setdefault({key!r})")
+
+    def update(self, *args: Any, **kwargs: Any) -> None:
+        if dict(*args, **kwargs):
+            raise self._refuse("update")
+
+    def __ior__(self, other: Any) -> _EmptyInfo:  # type: ignore[misc,override]
+        if dict(other):
+            raise self._refuse("|=")
+        return self
+
+    def __copy__(self) -> dict[str, Any]:
+        return {}
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> dict[str, Any]:
+        return {}
+
+    def __reduce__(self) -> tuple[type, tuple[()]]:
+        return (dict, ())
+
+
+#: The read-only empty info of every slot that did not finish a step, with ``share_empty_infos=True``.
+EMPTY_INFO: dict[str, Any] = _EmptyInfo()
 
 
 def stack_states(states: Sequence[EngineState]) -> EngineState:
@@ -142,6 +189,12 @@ class FormationVecEnv(VecEnv):
         engine: an existing ``Engine`` to step (then ``env_kwargs`` must be empty).
         draw_ahead: draw the next episodes of the envs that have used theirs up, in one batch, once this many
             have (0: draw an env's next episode when it finishes). None: ``num_envs // 4``, or 0 below 8 envs.
+        share_empty_infos: False (default): every slot's info is a dict of its own, as SB3's vec envs make them.
+            True: the slots that did not finish the step all hold :data:`EMPTY_INFO`, one read-only empty dict
+            (a finished slot still gets its own dict with ``terminal_observation``). SB3's algorithms, buffers and
+            wrappers only read those infos (they write only into finished slots'), and a write raises TypeError;
+            it saves making and freeing B n_l dicts a step (3,072 at B = 1024 in shared mode), about a fifth of
+            the step's time there (``python -m benchmarks``, section b).
         **env_kwargs: the ``Engine`` arguments (dynamics, follower_law, dt, max_cycles, framework, ...).
 
     Attributes:
@@ -163,6 +216,7 @@ class FormationVecEnv(VecEnv):
         engine: Engine | None = None,
         render_mode: str | None = None,
         draw_ahead: int | None = None,
+        share_empty_infos: bool = False,
         **env_kwargs: Any,
     ) -> None:
         if mode not in MODES:
@@ -173,6 +227,8 @@ class FormationVecEnv(VecEnv):
             raise TypeError(f"pass either engine= or engine keyword arguments, not both (got {sorted(env_kwargs)})")
         if render_mode not in (None, "rgb_array"):
             raise FormationError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if not isinstance(share_empty_infos, bool):
+            raise FormationError(f"share_empty_infos must be True or False, got {share_empty_infos!r}")
         if draw_ahead is None:
             draw_ahead = int(num_envs) // 4 if num_envs >= 8 else 0
         if int(draw_ahead) != draw_ahead or draw_ahead < 0:
@@ -192,6 +248,7 @@ class FormationVecEnv(VecEnv):
             slots = B
         self._per_env = eng.n_l if mode == "shared" else 1
         super().__init__(slots, obs_space, act_space)
+        self.share_empty_infos = share_empty_infos
         # a list of `slots` distinct empty dicts, pickled without its memo entries (``pickletools.optimize``: none is
         # referred to again): loading it was the quickest way we measured to make the step's infos (against the
         # pickle with its memo, marshal, map(dict.copy, ...) and a list comprehension)
@@ -389,7 +446,10 @@ class FormationVecEnv(VecEnv):
     def step_wait(self) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], list[dict[str, Any]]]:
         """Step all B envs, auto-reset the finished ones; (obs, rewards, dones, infos) per slot."""
         obs, rews, dones, envs, final = self._step_slots()
-        infos: list[dict[str, Any]] = pickle.loads(self._empty_infos)  # fresh empty dicts, made in C
+        if self.share_empty_infos:
+            infos = [EMPTY_INFO] * self.num_envs
+        else:
+            infos = pickle.loads(self._empty_infos)  # fresh empty dicts, made in C
         if envs.size:
             for s, inf, fin in zip(*self._slot_infos(envs, final), strict=True):
                 inf["terminal_observation"] = fin

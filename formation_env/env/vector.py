@@ -194,7 +194,7 @@ class FormationVecEnv(VecEnv):
             (a finished slot still gets its own dict with ``terminal_observation``). SB3's algorithms, buffers and
             wrappers only read those infos (they write only into finished slots'), and a write raises TypeError;
             it saves making and freeing B n_l dicts a step (3,072 at B = 1024 in shared mode), about a fifth of
-            the step's time there (``python -m benchmarks``, section b).
+            the step's time there (``python -m benchmarks.vec_profile``).
         **env_kwargs: the ``Engine`` arguments (dynamics, follower_law, dt, max_cycles, framework, ...).
 
     Attributes:

@@ -354,10 +354,9 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
     # each comparison on its own, ours and the peer in adjacent turns (A B, B A, ...: on this shared machine a
     # turn of all the cases one after another spread the per-repeat ratios over 2-4x); turns of ~50 ms (at least
     # 10 calls): ours steps ~1 ms, VMAS's 3-agent simple_spread ~2 ms, and each one's first call after a switch
-    # costs 1.5x (measured, benchmarks.vec_profile --switch)
-    # 21 repeats against VMAS's 3-agent case, whose ratio lies near the target (on this shared machine its
-    # per-repeat ratios spread over +-10 % around their median, so 7 left the median uncertain); 7 against the
-    # 10-agent cases (ratios of 40-160x; a navigation step takes ~0.1 s)
+    # costs 1.5x (measured, benchmarks.vec_profile --switch). 21 repeats against VMAS's 3-agent case, whose ratio
+    # lies near the target and whose per-repeat ratios spread widely (the min-max columns), 7 against the 10-agent
+    # cases (ratios of 30-190x; a navigation step takes ~0.1 s)
     calls, repeat, near, turn_s = (3, 3, 3, 0.02) if quick else (10, 7, 21, 0.05)
     peers = [k for k in fns if k.startswith("vmas")]
     runs: list[tuple[str, list[str], float | None, list[dict[str, list[float]]]]] = []

@@ -68,48 +68,33 @@ class Policy:
         return {agent: a[i] for i, agent in enumerate(base.possible_agents) if agent in obs_dict}
 
 
-def decode_state(engine: Engine, gs: NDArray[np.floating], template: EngineState | None = None) -> EngineState:
+def decode_state(engine: Engine, gs: NDArray[np.floating]) -> EngineState:
     """An :class:`EngineState` good enough for the planners from global states (B, state_dim).
 
-    Decodes positions, velocities, goals, time and the scenario's parameters (``narrow_passage``:
-    wall_x, gap_center, gap_width; ``obstacle_field``: circles). Values were clipped to the state
-    bounds, so positions outside the world box are not exact (they are collisions anyway).
+    Decodes positions, velocities, goals, time, the scenario's parameters (``Scenario.decode_params``) and the
+    moving obstacles (``Obstacle.decode``). Values were clipped to the state bounds, so positions outside the
+    world box are not exact (they are collisions anyway).
     """
     g = np.asarray(gs, dtype=np.float64)
     B, n, d = g.shape[0], engine.n, engine.d
-    nd = n * d
-    off = 0
-
-    def take(k: int) -> Array:
-        nonlocal off
-        out = g[:, off : off + k]
-        off += k
-        return out
-
-    pos = take(nd).reshape(B, n, d)
-    vel = take(nd).reshape(B, n, d)
-    goal = take(nd).reshape(B, n, d)
-    goal_vel = take(nd).reshape(B, n, d)
-    err = take(1)[:, 0]
-    take(d * d)
-    pv = take(int(engine.scenario.param_low.size))
-    tfrac = take(1)[:, 0]
+    sizes = [n * d] * 4 + [1, d * d, int(engine.scenario.param_low.size)]
+    probe = engine.reset(np.random.default_rng(0), 1).params
+    sizes += [int(ob.state_bounds(probe[ob.key].shape[1], d, engine.bounds)[0].size) for ob in engine.obstacles]
+    parts = np.split(g, np.cumsum(sizes), axis=1)
+    pos, vel, goal, goal_vel = (a.reshape(B, n, d) for a in parts[:4])
+    err, pv, tfrac = parts[4][:, 0], parts[6], parts[-1][:, 0]
     k = np.rint(tfrac * engine.max_cycles).astype(np.int64)
-    name = engine.scenario_name
-    params: dict[str, Array] = {}
-    # goal pose (static goals): least-squares fit of the goal positions
-    th, b = engine.affine.fit(goal)
-    params["goal_theta"], params["goal_b"] = th, b
-    if name == "narrow_passage":
-        params["wall_x"], params["gap_center"], params["gap_width"] = pv[:, 0], pv[:, 1], pv[:, 2]
-    elif name == "obstacle_field":
-        params["circles"] = pv.reshape(B, -1, d + 1)
+    th, b = engine.affine.fit(goal)  # static goals: the least-squares fit of the goal positions
+    params: dict[str, Array] = {"goal_theta": th, "goal_b": b, **engine.scenario.decode_params(pv)}
+    for ob, vec in zip(engine.obstacles, parts[7:-1], strict=True):
+        dec = ob.decode(vec, k * engine.dt, d)
+        if dec is not None:
+            params[ob.key] = dec
     x = engine.dynamics.state_from_position(pos)
     if engine.kind == "double_integrator":
         x = np.concatenate([pos, vel], axis=-1).reshape(B, n, -1)
-    ref = np.concatenate([goal.reshape(B, -1), goal_vel.reshape(B, -1), np.ones((B, 1)), k[:, None]], axis=1)
-    zeros = np.zeros(B)
-    return EngineState(x, pos, vel, None, k, ref, zeros[:, None], err, k * 0, params)
+    gd = np.linalg.norm(goal - pos, axis=-1)[:, engine.leaders]
+    return EngineState(x, pos, vel, None, k, goal, goal_vel, gd, err, k * 0, params)
 
 
 class AnalyticPolicy(Policy):
@@ -122,7 +107,7 @@ class AnalyticPolicy(Policy):
 
     def __init__(self, engine: Engine | Any, **params: Any) -> None:
         self.engine = _engine_of(engine)
-        self.planner = make_planner(self.engine.scenario_name, **params)
+        self.planner = make_planner(self.engine.scenario, **params)
         self.name = "analytic"
 
     def act_engine(self, engine: Engine, state: EngineState, obs: Any = None) -> Array:
@@ -199,7 +184,7 @@ class LearnedPolicy(Policy):
 
     def _plan(self, engine: Engine, state: EngineState) -> Array:
         if self._planner is None:
-            self._planner = make_planner(engine.scenario_name)
+            self._planner = make_planner(engine.scenario)
         return self._planner(engine, state).reshape(state.batch_size, -1)
 
     def act(self, observation: NDArray[np.floating]) -> NDArray[np.float32]:

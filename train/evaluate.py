@@ -39,9 +39,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from formation_env.env.engine import Engine, EngineState
-from formation_env.env.vector import reset_batch, stack_states
+from agents.rollout import ActFn, reset_paired, run_batch
 
-__all__ = ["METRIC_KEYS", "evaluate", "mean_ci", "paired_difference", "run_batch", "stack_states", "wilson"]
+__all__ = ["METRIC_KEYS", "evaluate", "mean_ci", "paired_difference", "run_batch", "wilson"]
 
 Array = NDArray[np.float64]
 
@@ -63,77 +63,6 @@ GAP_SUITES: dict[str, tuple[float, float]] = {
     "wide_1.6-2.0": (1.6, 2.0),
 }
 
-ActFn = Callable[[Engine, EngineState, Any], Array]
-
-
-def reset_paired(engine: Engine, seeds: Sequence[int]) -> EngineState:
-    """One episode per seed (``Engine.reset(default_rng(seed), 1)`` each), stacked: the paired suite."""
-    return reset_batch(engine, [np.random.default_rng(int(s)) for s in seeds])
-
-
-def run_batch(
-    engine: Engine, act: ActFn, seeds: Sequence[int], record: int | None = None, max_steps: int | None = None
-) -> dict[str, Any]:
-    """Roll out one episode per seed, batched; ``act(engine, state, obs) -> (B, n_l, p)``.
-
-    Finished episodes keep stepping (their results are frozen at their end). ``record``: index of an
-    episode whose renderer frames (``engine.frame`` dicts) are kept under ``"frames"``.
-
-    Returns per-episode arrays (B,): success, collision (bool), time_to_goal (s, nan if none),
-    mean_formation_err, max_formation_err, min_clearance (m), control_effort, steps.
-    """
-    state = reset_paired(engine, seeds)
-    B = state.batch_size
-    obs = engine.observe(state)
-    steps = engine.max_cycles if max_steps is None else int(max_steps)
-    done = np.zeros(B, bool)
-    success = np.zeros(B, bool)
-    collision = np.zeros(B, bool)
-    t_goal = np.full(B, np.nan)
-    err_sum = np.zeros(B)
-    err_max = state.err.copy()
-    n_samples = np.zeros(B)
-    clear = np.full(B, np.inf)
-    effort = np.zeros(B)
-    frames: list[dict[str, Any]] = []
-    trail: list[Array] = []
-    if record is not None:
-        trail.append(state.pos[record].copy())
-        frames.append(engine.frame(state, record, np.array(trail)))
-    for _ in range(steps):
-        a = act(engine, state, obs)
-        was = state
-        state, obs, _r, term, trunc, info = engine.step(state, a)
-        live = ~done
-        err_sum += np.where(live, info["formation_error"], 0.0)
-        err_max = np.where(live, np.maximum(err_max, info["formation_error"]), err_max)
-        n_samples += live
-        clear = np.where(live, np.minimum(clear, info["min_clearance"]), clear)
-        effort += np.where(live, info["control_effort"].sum(axis=1) * engine.dt, 0.0)
-        newly = live & info["success"]
-        t_goal[newly & np.isnan(t_goal)] = info["time"][newly & np.isnan(t_goal)]
-        success |= newly
-        collision |= live & info["collision"]
-        if record is not None and not done[record]:
-            trail.append(state.pos[record].copy())
-            frames.append(engine.frame(state, record, np.array(trail[-60:])))
-        done |= term | trunc
-        del was
-        if done.all():
-            break
-    if not engine.scenario.terminate_on_success:  # judged at the last sample (e.g. maneuver)
-        success = success & info["success"]
-    return {
-        "success": success & ~collision,
-        "collision": collision,
-        "time_to_goal": np.where(success & ~collision, t_goal, np.nan),
-        "mean_formation_err": err_sum / np.maximum(n_samples, 1),
-        "max_formation_err": err_max,
-        "min_clearance": clear,
-        "control_effort": effort,
-        "steps": n_samples,
-        "frames": frames,
-    }
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:

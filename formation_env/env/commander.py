@@ -6,7 +6,6 @@ Same engine and scenarios as the PettingZoo env (B = 1).
 
 from __future__ import annotations
 
-import math
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -18,6 +17,7 @@ from formation_env.core.errors import FormationError
 
 from .control import track_targets
 from .engine import Engine, EngineState, StepInfo
+from .formation import neutral_info
 from .scenarios._base import affine_batch, rotation_3d
 
 __all__ = ["ACTION_MODES", "FormationCommanderEnv"]
@@ -115,6 +115,7 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self._obs_low, self._obs_high = low, high
         self._state: EngineState | None = None
+        self._done = False
         self._pose: dict[str, Array] = {}
         self._renderer: Any = None
 
@@ -169,40 +170,49 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
         super().reset(seed=seed)
         self._state = self.engine.reset(self.np_random, 1)
+        self._done = False
         if self.action_mode == "maneuver":
             self._init_pose(self._state)
         self._trail = [self._state.pos[0]]
         if self.render_mode == "human":
             self.render()
-        return self._obs(), {}
+        gd = float(np.max(np.linalg.norm(self._state.goal[0] - self._state.pos[0], axis=-1)))
+        return self._obs(), neutral_info(gd, float(self._state.err[0]))
 
     def step(self, action: Any) -> tuple[NDArray[np.float32], SupportsFloat, bool, bool, dict[str, Any]]:
         if self._state is None:
             raise FormationError("call reset() before step()")
+        if self._done:
+            raise FormationError("the episode is over: call reset() before step()")
         eng = self.engine
-        if np.size(action) != self._n_act:
-            raise ValueError(f"action must have shape {self.action_space.shape}, got {np.shape(action)}")
-        if self.action_mode == "leaders":  # as it is: step1 converts it once, and refuses NaN or inf naming the leader
-            leader_a = action
+        try:
+            a = np.asarray(action, dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"action must be a real array of shape {self.action_space.shape}: {exc}") from None
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
+        if self.action_mode == "leaders":
+            leader_a = a.reshape(1, eng.n_l, eng.p)
         else:
-            a = np.asarray(action, dtype=np.float64).reshape(1, -1)
-            if not math.isfinite(sum(a[0].tolist())) and not np.all(np.isfinite(a)):  # (a finite sum: all finite)
-                raise ValueError(f"action holds NaN or inf: {a[0].tolist()}; the state is unchanged")
-            a = np.clip(a, -1.0, 1.0)
+            if not np.all(np.isfinite(a)):
+                raise ValueError(f"action holds NaN or inf: {a.tolist()}; the state is unchanged")
+            a = np.clip(a, -1.0, 1.0)[None]
             rl = eng.fw.positions[eng.leaders]
             before = affine_batch(rl, self._theta(), self._pose["b"])
             self._advance_pose(a)
             after = affine_batch(rl, self._theta(), self._pose["b"])
-            leader_a = track_targets(eng, self._state, after, (after - before) / eng.dt)[0]
-        self._state, glob, rew, term, trunc, info = eng.step1_global(self._state, leader_a)
-        out = StepInfo(info)
-        out["control_effort"] = sum(info["control_effort"])
+            leader_a = track_targets(eng, self._state, after, (after - before) / eng.dt)
+        self._state, _, rew, term, trunc, inf = eng.step(self._state, leader_a, self.np_random)
+        out = StepInfo({key: val[0].item() for key, val in inf.items() if key != "control_effort"})
+        out["control_effort"] = float(inf["control_effort"][0].sum())
+        terminated, truncated = bool(term[0]), bool(trunc[0])
+        self._done = terminated or truncated
         if self.render_mode is not None:  # the trail is drawn only
             self._trail.append(self._state.pos[0])
             del self._trail[:-60]
         if self.render_mode == "human":
             self.render()
-        return self._obs(glob), sum(rew) / len(rew), term, trunc, out
+        return self._obs(), float(rew[0].mean()), terminated, truncated, out
 
     def render(self) -> NDArray[np.uint8] | None:
         if self.render_mode is None:

@@ -12,9 +12,24 @@ from pettingzoo import ParallelEnv
 
 from formation_env.core.errors import FormationError
 
-from .engine import Engine, EngineState, StepInfo
+from .engine import INFO_KEYS, Engine, EngineState, StepInfo
+from .observations import observation_table
+from .rewards import reward_table
 
-__all__ = ["FormationEnv"]
+__all__ = ["FormationEnv", "neutral_info"]
+
+
+def _indent(text: str) -> str:
+    return "\n".join("    " + line for line in text.splitlines())
+
+
+def neutral_info(goal_distance: float, formation_error: float) -> StepInfo:
+    """An info dict with every step key at its neutral value (for ``reset``: nothing happened yet)."""
+    values: dict[str, Any] = {"success": False, "collision": False, "out_of_bounds": False}
+    values.update(formation_error=formation_error, min_clearance=float("inf"), goal_distance=goal_distance)
+    values.update(time=0.0, control_effort=0.0)
+    assert set(values) == set(INFO_KEYS)
+    return StepInfo(values)
 
 
 class FormationEnv(ParallelEnv, EzPickle):
@@ -29,7 +44,7 @@ class FormationEnv(ParallelEnv, EzPickle):
     ``dynamic_distributed`` with m Jacobi rounds, ``linear`` with the Riccati gain of Theorem 3).
     By moving, the leaders steer the whole formation through translation, rotation, scaling
     and shear (the affine image), e.g. shrinking it to pass a gap. Scenarios (``scenario``):
-    ``hold``, ``maneuver``, ``maneuver_3d``, ``narrow_passage``, ``obstacle_field``
+    ``hold``, ``maneuver``, ``maneuver_3d``, ``narrow_passage``, ``obstacle_field``, ``moving_obstacles``
     (``formation_env.env.scenarios``; each file's docstring gives its geometry and success test).
 
     ## Action Space
@@ -43,40 +58,30 @@ class FormationEnv(ParallelEnv, EzPickle):
     ## Observation Space
 
     ``Box(low, high, (obs_dim,), float32)``, the same for every leader, in world axes and SI units;
-    every entry is clipped to its (finite) bounds. For the 2D default framework (3 leaders,
-    16 rays) obs_dim = 34. W = world box (``bounds``), E = its extent, v = ``max_speed``:
+    every entry is clipped to its (finite) bounds. The observation is a list of declared blocks
+    (``observation=[...]``; ``obs_blocks`` maps each name to its slice). The default, ``formation_v0``'s,
+    is ``position, velocity, other_leaders, goal, goal_velocity, theta, time, formation_error, obstacles``:
+    obs_dim = 34 for the 2D default framework (3 leaders, 16 rays). The registered blocks
+    (:mod:`formation_env.env.observations`; d the dimension, W the world box, E its extent, v ``max_speed``,
+    k ``k_nearest``, R ``n_rays``, N ``n_nearest``):
 
-    | entries            | size           | meaning                                                 | bounds      |
-    |--------------------|----------------|---------------------------------------------------------|-------------|
-    | position           | d              | own position p_i (m)                                    | W           |
-    | velocity           | d              | own velocity (m/s)                                      | +-v         |
-    | other_leaders      | (n_l - 1) d    | p_j - p_i for the other leaders, in leader order (m)    | +-E         |
-    | goal               | d              | own goal (reference) position minus p_i (m)             | +-E         |
-    | goal_velocity      | d              | velocity of the own goal position (m/s; 0 if static)    | +-v         |
-    | theta              | d^2            | Theta of the least-squares affine fit of all agents     | +-3         |
-    | time               | 1              | k / max_cycles                                          | [0, 1]      |
-    | formation_error    | 1              | RMS distance of all agents from their affine fit (m)   | [0, \\|E\\|] |
-    | obstacles (2D)     | n_rays         | range to the first wall/circle along fixed world rays  | [0, 1]      |
-    |                    |                | at angles 2 pi j / n_rays, divided by ``sensor_range`` |             |
-    | obstacles (3D)     | n_nearest d    | per nearest obstacle: unit direction times              | [-1, 1]     |
-    |                    |                | (1 - surface distance / ``sensor_range``)^+            |             |
+OBSERVATION_TABLE
 
-    ``obs_blocks`` maps these names to slices. ``state()`` (``state_space``) is the global vector:
-    positions, velocities, goal positions and goal velocities of all n agents, formation error,
-    fitted Theta, the scenario's parameters, time fraction.
+    Options for decentralised leaders: ``nearest_agents`` with ``k_nearest`` and ``sense_radius`` (m), which
+    also limits the obstacle range; ``agent_id``; ``obs_noise`` (Gaussian, each entry's units, on the
+    measurement blocks). ``state()`` (``state_space``) is the global vector: positions, velocities, goal
+    positions and goal velocities of all n agents, formation error, fitted Theta, the scenario's parameters,
+    the moving obstacles' current centres, velocities and radii, time fraction.
 
     ## Rewards
 
-    Per leader i at each step (weights ``reward_weights``, defaults per scenario; T = dt):
+    Per leader i at each step, r_i = sum_t w_t term_t (:mod:`formation_env.env.rewards`; weights
+    ``reward_weights`` over the scenario's over the defaults; T = dt):
 
-        r_i = w_progress (g_i(k) - g_i(k+1)) - w_distance T g_i(k+1) - w_formation T e(k+1)
-              - w_effort T |a_i|^2 / p - w_collision c(k+1) + w_success s(k+1)
+REWARD_TABLE
 
-    g_i: distance (m) of leader i to its goal position; e: affine-image formation error (m);
-    a_i: the clipped action; c: 1 on a collision (agent-agent, wall, obstacle, leaving the
-    world box), s: 1 on success. Defaults: progress 1, distance 0, formation 1, effort 0.01,
-    collision 10, success 10; ``maneuver`` uses distance 1, progress 0, success 0; ``hold``
-    adds distance 0.1.
+    g_i: distance (m) of leader i to its goal position; e: affine-image formation error (m); a_i: the
+    clipped action. ``maneuver`` uses distance 1, progress 0, success 0; ``hold`` adds distance 0.1.
 
     ## Starting State
 
@@ -98,15 +103,19 @@ class FormationEnv(ParallelEnv, EzPickle):
     ``max_speed`` (3 m/s), ``reward_weights``, and the scenario's own (e.g. ``gap_width``);
     unknown ones raise TypeError. ``stationary`` is offered with single integrators only.
 
-    Info per agent per step (a fresh dict): ``success``, ``collision``, ``out_of_bounds`` (bool),
-    ``formation_error``, ``min_clearance`` (m; smallest agent-agent or agent-obstacle gap between
-    surfaces), ``goal_distance`` (m; largest agent distance to its goal position), ``time`` (s),
-    ``control_effort`` (|u_i|^2 of this leader's applied input).
+    Info per agent per step (a fresh dict; ``reset`` gives every key with its neutral value): ``success``,
+    ``collision``, ``out_of_bounds`` (bool), ``formation_error``, ``min_clearance`` (m; smallest agent-agent
+    or agent-obstacle gap between surfaces), ``goal_distance`` (m; largest agent distance to its goal
+    position), ``time`` (s), ``control_effort`` (|u_i|^2 of this leader's applied input).
 
     ## Version History
 
     * v0: initial version.
     """
+
+    __doc__ = (__doc__ or "").replace("OBSERVATION_TABLE", _indent(observation_table())).replace(
+        "REWARD_TABLE", _indent(reward_table())
+    )
 
     metadata: dict[str, Any] = {
         "name": "formation_v0",
@@ -190,39 +199,41 @@ class FormationEnv(ParallelEnv, EzPickle):
             self._rng = np.random.default_rng(seed)
         self._state = self.engine.reset(self._rng, 1)
         self.agents = self.possible_agents[:]
-        obs = self.engine.observe(self._state)[0]
+        obs = self.engine.observe(self._state, self._rng)[0]
         self._trail = [self._state.pos[0]]
         if self.render_mode == "human":
             self.render()
-        return {a: obs[i] for i, a in self._index}, {a: {} for a in self.agents}
+        gd = float(np.max(np.linalg.norm(self._state.goal[0] - self._state.pos[0], axis=-1)))
+        info = neutral_info(gd, float(self._state.err[0]))
+        return {a: obs[i] for i, a in self._index}, {a: StepInfo(info) for a in self.agents}
 
     def step(
         self, actions: dict[str, Any]
     ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
         """Advance one sample with every live leader's action (see the class docstring)."""
+        if self._state is None:
+            raise FormationError("call reset() before step()")
         if not self.agents:
-            if actions:
-                raise FormationError("the episode is over: call reset() before step()")
-            return {}, {}, {}, {}, {}
+            raise FormationError("the episode is over: call reset() before step()")
+        if not isinstance(actions, dict) or set(actions) != set(self.agents):
+            got = sorted(actions) if isinstance(actions, dict) else type(actions).__name__
+            raise ValueError(f"step() needs a dict with an action for exactly the live agents {self.agents}, got {got}")
         try:
-            acts = [actions[ag] for ag in self.possible_agents]
-        except KeyError as exc:
-            raise ValueError(f"step() needs an action for every live agent; missing {exc.args[0]!r}") from None
-        try:
-            a = np.array(acts, dtype=np.float64)
-        except ValueError as exc:
-            raise ValueError(f"actions must be arrays of shape {self._act_space.shape}: {exc}") from None
+            a = np.array([actions[ag] for ag in self.possible_agents], dtype=np.float64)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"actions must be real arrays of shape {self._act_space.shape}: {exc}") from None
         if a.shape != self._act_shape:
             raise ValueError(f"each action must have shape {self._act_space.shape}, got actions of shape {a.shape[1:]}")
-        state, o, rew, t, tr, info = self.engine.step1(self._state, a)  # type: ignore[arg-type]
-        assert o is not None
+        state, ob, rw, te, trn, inf = self.engine.step(self._state, a[None], self._rng)
         self._state = state
+        o, t, tr = ob[0], bool(te[0]), bool(trn[0])
         agents = self.possible_agents
-        effort = info.pop("control_effort")
-        infos: dict[str, dict[str, Any]] = {ag: StepInfo(info, control_effort=effort[i]) for i, ag in self._index}
+        shared = {key: val[0].item() for key, val in inf.items() if key != "control_effort"}
+        effort = inf["control_effort"][0].tolist()
+        infos: dict[str, dict[str, Any]] = {ag: StepInfo(shared, control_effort=effort[i]) for i, ag in self._index}
         out = (
             {ag: o[i] for i, ag in self._index},
-            dict(zip(agents, rew, strict=True)),
+            dict(zip(agents, rw[0].tolist(), strict=True)),
             dict.fromkeys(agents, t),
             dict.fromkeys(agents, tr),
             infos,

@@ -1,4 +1,4 @@
-"""Scenarios, one small file each; ``REGISTRY`` maps a name to its ``make``.
+"""Scenarios, one small file each; ``REGISTRY`` maps a name to its class (the one registry).
 
 ========================  ====  ===============================================================
 name                      d     task
@@ -9,32 +9,26 @@ name                      d     task
 ``maneuver_3d``           3     ``maneuver`` on the 3D ``bipyramid_3d`` framework
 ``narrow_passage``        2     shrink through a gap narrower than the formation, restore, reach goal
 ``obstacle_field``        2, 3  reach a goal through scattered circular (spherical) obstacles
+``moving_obstacles``      2     cross lanes of discs moving at constant velocity, reach the goal
 ========================  ====  ===============================================================
+
+A new scenario is a file with a :class:`Scenario` subclass and a line here; tests take the list from
+``REGISTRY``.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from typing import Any
-
-from . import hold, maneuver, maneuver_3d, narrow_passage, obstacle_field
 from ._base import NAMED_FRAMEWORKS, Scenario
+from .hold import Hold
+from .maneuver import Maneuver
+from .maneuver_3d import Maneuver3D
+from .moving_obstacles import MovingObstacles
+from .narrow_passage import NarrowPassage
+from .obstacle_field import ObstacleField
 
 __all__ = ["NAMED_FRAMEWORKS", "REGISTRY", "Scenario"]
 
-REGISTRY: dict[str, Callable[..., Any]] = {
-    "hold": hold.make,
-    "maneuver": maneuver.make,
-    "maneuver_3d": maneuver_3d.make,
-    "narrow_passage": narrow_passage.make,
-    "obstacle_field": obstacle_field.make,
-}
-
-#: Scenario classes by name (for their class attributes, e.g. ``default_framework``).
-CLASSES: dict[str, type[Scenario]] = {
-    "hold": hold.Hold,
-    "maneuver": maneuver.Maneuver,
-    "maneuver_3d": maneuver_3d.Maneuver3D,
-    "narrow_passage": narrow_passage.NarrowPassage,
-    "obstacle_field": obstacle_field.ObstacleField,
+#: Scenario classes by name.
+REGISTRY: dict[str, type[Scenario]] = {
+    cls.name: cls for cls in (Hold, Maneuver, Maneuver3D, NarrowPassage, ObstacleField, MovingObstacles)
 }

@@ -1,37 +1,39 @@
 """The scenario interface, shared batched pose helpers, and the env's named frameworks.
 
-A scenario is a small class in its own file (MPE2 ``scenarios/``, VMAS
-``BaseScenario``). The engine owns the dynamics, the follower law, the
-observation and the reward formula; a scenario supplies the task:
+A scenario is a small class in its own file (MPE2 ``scenarios/``, VMAS ``BaseScenario``). The engine owns
+the dynamics, the follower law, contacts, observations and rewards; a scenario supplies the task and owns
+its metadata:
 
-* ``__init__(fw, *, agent_radius, horizon, **kwargs)`` ("make"): reads its own
-  keyword arguments and refuses unknown ones.
-* ``draws()`` and ``build(raw)``: the episode's random draws in stream order
-  (:class:`Draw`: uniform in a range, standard normal, or a sign), and the
-  draw-free, batched map from them to the per-episode arrays. From these the base
-  class makes ``reset(rng, B)`` (B episodes from one generator: start positions,
-  goal pose, obstacles, and any parameters of its own) and ``reset_each(rngs)``
-  (one episode per generator, equal to ``reset(rngs[b], 1)``, with only the draws
-  run per generator: the vectorised env's auto-reset).
-* ``reference(params, t)``: the goal pose (Theta(t), b(t)) at time t for
-  scenarios whose goal moves (``moving_goal``); static goals are ``goal_theta``
-  and ``goal_b`` from ``reset``.
-* ``param_vector(params)``: the scenario's parameters for the global state.
-* ``is_success(goal_distance, formation_error)``: the success test (``is_terminal``
-  is success, when ``terminate_on_success``, or a collision, judged by the engine).
-* ``reward_weights``: the weights of the engine's reward terms for this task.
+* ``__init__(fw, *, agent_radius, horizon, **kwargs)`` ("make"): reads its own keyword arguments (in
+  ``_init``) and refuses unknown ones.
+* ``draws()`` and ``build(raw)``: the episode's random draws in stream order (:class:`Draw`: uniform in a
+  range, standard normal, or a sign), and the draw-free, batched map from them to the per-episode arrays.
+  From these the base class makes ``reset(rng, B)`` (B episodes from one generator) and ``reset_each(rngs)``
+  (one episode per generator, equal to ``reset(rngs[b], 1)``: the vectorised env's auto-reset).
+* ``obstacle_types``: the obstacle components it uses (:mod:`formation_env.env.obstacles`); ``build`` gives
+  each type's parameters under the type's key (e.g. ``params["segments"]``). The step knows no scenario.
+* ``reference(params, t)``: the goal pose (Theta(t), b(t)) at times t for scenarios whose goal moves
+  (``moving_goal``); static goals are ``goal_theta`` and ``goal_b`` from ``build``.
+* ``param_vector(params)`` with ``param_low`` / ``param_high``: what a policy needs to decode the task from
+  the global state (``state()``), e.g. the wall's place and the gap.
+* ``task_features(ctx)`` with ``task_feature_bounds()``: the optional ``task`` observation block, the task
+  relative to the formation (e.g. where the gap is and how much room it leaves).
+* ``is_success(goal_distance, formation_error)``: the success test at one sample.
+* ``grows_world``: the world box grows to hold a large framework (tasks that pose the formation itself);
+  otherwise a framework too large for the obstacles is refused (:meth:`Scenario.fit_world`).
+* ``planner``: ``"module:Class"`` of its analytic planner (under ``agents/``), or None.
+* ``weights``: its reward weights over the defaults (:mod:`formation_env.env.rewards`).
 
-Goal poses are affine images x_i* = Theta r_i + b (paper eq. 7) of the nominal
-configuration r; every pose array is batched: Theta (B, d, d), b (B, d).
+Goal poses are affine images x_i* = Theta r_i + b (paper eq. 7) of the nominal configuration r; every pose
+array is batched: Theta (B, d, d), b (B, d).
 """
 
 from __future__ import annotations
 
 import functools
-import itertools
 import math
 from collections.abc import Callable, Sequence
-from typing import Any, ClassVar, NamedTuple
+from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,7 +42,10 @@ from formation_env.core.errors import FormationError
 from formation_env.core.framework import Framework
 from formation_env.core.validation import check_kwargs_consumed
 
-from .. import _kernel
+from ..obstacles import Obstacle
+
+if TYPE_CHECKING:
+    from ..state import StepContext
 
 __all__ = [
     "NAMED_FRAMEWORKS",
@@ -57,28 +62,15 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
+#: Reach of a pose beyond the nominal framework in the growing worlds: |Theta| <= 1.4 (scale) x 1.5 (shear).
+REACH = 2.2
+#: Up to this many agents the start-gap test checks all pairs; above, a k-d tree.
+ALL_PAIRS_GAP_UP_TO = 512
+
 
 def _root(u: Array, d: int) -> Array:
-    """u^(1/d) elementwise, with the bits of the compiled redraws (``_kernel.settle_starts``) on every machine:
-    ``np.sqrt`` for d = 2 (correctly rounded everywhere), else C's ``pow`` (``math.pow``) value by value, since
-    numpy's own power may run a SIMD kernel (AVX-512) that differs from ``pow`` in the last bit."""
-    if d == 2:
-        return np.sqrt(u)
-    if d == 1:
-        return np.array(u, dtype=np.float64)
-    e = 1.0 / d
-    return np.fromiter(map(math.pow, u.ravel(), itertools.repeat(e)), np.float64, u.size).reshape(u.shape)
-
-
-#: Weights of the engine's reward terms (see ``FormationEnv``'s Rewards section).
-DEFAULT_WEIGHTS: dict[str, float] = {
-    "progress": 1.0,
-    "distance": 0.0,
-    "formation": 1.0,
-    "collision": 10.0,
-    "effort": 0.01,
-    "success": 10.0,
-}
+    """u^(1/d) elementwise (the followers' start radii, uniform in a d-ball)."""
+    return np.sqrt(u) if d == 2 else np.power(u, 1.0 / d)
 
 
 def uniform(rng: np.random.Generator, bounds: tuple[float, float], size: int | tuple[int, ...]) -> Array:
@@ -167,10 +159,6 @@ NAMED_FRAMEWORKS: dict[str, Callable[[], tuple[Framework, Array]]] = {
 }
 
 
-#: Up to this many agents ``Scenario.start_positions`` checks all pairs; above, a k-d tree.
-ALL_PAIRS_GAP_UP_TO = 512
-
-
 class Scenario:
     """Base class of the scenarios (see the module docstring for the hooks).
 
@@ -181,11 +169,11 @@ class Scenario:
         moving_goal: the goal pose is time-varying (``reference``).
         terminate_on_success: success ends the episode (else it is judged every step, for the last).
         half_size: half-width (m) of the world box centred on the origin, per axis.
+        obstacle_types: its obstacle components. grows_world, planner, weights: see the module docstring.
 
-    Instance attributes set by ``__init__``: ``fw``, ``d``, ``bounds`` (2, d),
-    ``goal_tol`` (m, every agent within it of its goal), ``formation_tol`` (m,
-    formation error below it), ``hold_steps`` (consecutive successful samples
-    needed), ``reward_weights``.
+    Instance attributes set by ``__init__``: ``fw``, ``d``, ``r``, ``bounds`` (2, d), ``goal_tol`` (m, every
+    agent within it of its goal), ``formation_tol`` (m, formation error below it), ``hold_steps``
+    (consecutive successful samples needed), ``weights`` (its reward weights).
     """
 
     name: ClassVar[str] = ""
@@ -194,6 +182,9 @@ class Scenario:
     moving_goal: ClassVar[bool] = False
     terminate_on_success: ClassVar[bool] = True
     half_size: ClassVar[tuple[float, ...]] = (5.0, 5.0)
+    obstacle_types: ClassVar[tuple[type[Obstacle], ...]] = ()
+    grows_world: ClassVar[bool] = False
+    planner: ClassVar[str | None] = None
     weights: ClassVar[dict[str, float]] = {}
     goal_tol_default: ClassVar[float] = 0.2
     formation_tol_default: ClassVar[float] = 0.05
@@ -211,87 +202,39 @@ class Scenario:
         self.r = fw.positions
         self.agent_radius = float(agent_radius)
         self.horizon = float(horizon)
-        self.goal_tol = float(kwargs.pop("goal_tol", self.goal_tol_default))
-        self.formation_tol = float(kwargs.pop("formation_tol", self.formation_tol_default))
-        self.hold_steps = int(kwargs.pop("hold_steps", self.hold_steps_default))
-        if not (self.goal_tol > 0 and self.formation_tol > 0 and self.hold_steps >= 1):
-            raise FormationError(
-                f"goal_tol and formation_tol must be positive and hold_steps >= 1, got "
-                f"{self.goal_tol}, {self.formation_tol}, {self.hold_steps}"
-            )
+        self.goal_tol = _positive("goal_tol", kwargs.pop("goal_tol", self.goal_tol_default))
+        self.formation_tol = _positive("formation_tol", kwargs.pop("formation_tol", self.formation_tol_default))
+        hs = kwargs.pop("hold_steps", self.hold_steps_default)
+        if isinstance(hs, bool) or not isinstance(hs, (int, np.integer)) or hs < 1:
+            raise FormationError(f"hold_steps must be an integer >= 1, got {hs!r}")
+        self.hold_steps = int(hs)
         half = np.asarray(self.half_size[: self.d], dtype=np.float64)
         self.bounds: Array = np.stack([-half, half]).astype(np.float64)
-        self.reward_weights = {**DEFAULT_WEIGHTS, **self.weights}
+        self.obstacles: list[Obstacle] = [cls() for cls in self.obstacle_types]
+        for ob in self.obstacles:
+            if self.d not in ob.dims:
+                raise FormationError(f"scenario {self.name!r}: {type(ob).__name__} obstacles are {ob.dims}D only")
         self._init(kwargs)
         check_kwargs_consumed(kwargs, f"scenario {self.name!r}")
+        self.fit_world()
 
     def _init(self, kw: dict[str, Any]) -> None:
-        """Read scenario-specific keyword arguments (pop them from ``kwargs``)."""
+        """Read scenario-specific keyword arguments (pop them from ``kw``)."""
 
     # ---------------------------------------------------------------- hooks
     def draws(self) -> list[Draw]:
         """The random draws of one episode, in stream order (the last two are :meth:`follower_draws` where
-        the start positions are noisy). :meth:`reset` and :meth:`reset_each` take them from here."""
+        the start positions are noisy)."""
         raise NotImplementedError
 
     def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
         """Per-episode arrays from the draws (``raw[name]`` of shape (B, *shape)), batched and draw-free.
 
-        Returns (params, pose): params as :meth:`reset` (without ``start`` when pose is given), and the
-        start pose (Theta0 (B, d, d), b0 (B, d)) on which :meth:`reset` places the agents, or None when
-        params hold ``start``.
+        Returns (params, pose): params with ``goal_theta`` (B, d, d) and ``goal_b`` (B, d) (static goals),
+        each obstacle type's parameters under its key and the scenario's own; and the start pose (Theta0
+        (B, d, d), b0 (B, d)) on which the agents are placed, or None when params hold ``start`` (B, n, d).
         """
         raise NotImplementedError
-
-    def reset(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
-        """Per-episode arrays: ``start`` (B, n, d), ``goal_theta`` (B, d, d), ``goal_b`` (B, d),
-        ``segments`` (B, S, 2, d), ``circles`` (B, C, d + 1), plus the scenario's own.
-
-        Each draw of :meth:`draws` is one generator call for all B episodes, in order; then the
-        followers' noise is redrawn (for the offending episodes) as in :meth:`start_positions`."""
-        raw = self._plan.draw(rng, B)
-        params, pose = self.build(raw)
-        if pose is not None:
-            params["start"] = self._place_start(pose, raw, lambda todo: self._noise_plan.draw(rng, todo.size))
-        return params
-
-    def reset_each(
-        self,
-        rngs: Sequence[np.random.Generator],
-        bits: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None,
-    ) -> dict[str, Array]:
-        """One episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` (the same draws; the
-        geometry runs once for all episodes, so values agree to rounding).
-
-        Per generator only the draws run, one call per run of same-kind draws (:class:`DrawPlan`), and
-        the followers' redraws one at a time, as ``reset(rngs[b], 1)`` makes them. The generators must be
-        distinct objects. A scenario without :meth:`draws` (one that overrides :meth:`reset` only) resets
-        per generator. ``bits``: ``_kernel.bit_generators(rngs)``, where the caller keeps them (and the generators
-        alive) across calls; else they are looked up here.
-        """
-        if type(self).draws is Scenario.draws:
-            eps = [self.reset(g, 1) for g in rngs]
-            return {key: np.concatenate([ep[key] for ep in eps]) for key in eps[0]}
-        if self._plan.runs is None:
-            bits = None
-        elif bits is None:
-            bits = _kernel.bit_generators(list(rngs))
-        raw = self._plan.draw_each(rngs, bits)
-        params, pose = self.build(raw)
-        if pose is None:
-            return params
-        if bits is not None and "_u" in raw and self.fw.n <= ALL_PAIRS_GAP_UP_TO:  # the redraws compiled too
-            base = affine_batch(self.r, *pose)
-            params["start"] = start = base.copy()
-            dirs, u = (np.ascontiguousarray(raw[key]) for key in ("_dirs", "_u"))
-            gap3 = 3.0 * self.agent_radius
-            f = (start, base, dirs, u, self._follower_index, gap3, self.follower_noise, 1.0 / self.d)
-            _kernel.settle_starts(*f, self.start_tries, *bits)
-        else:
-            params["start"] = self._place_start(
-                pose, raw, lambda todo: self._noise_plan.draw_each([rngs[b] for b in todo.tolist()])
-            )
-        return params
 
     def reference(self, params: dict[str, Array], t: Array) -> tuple[Array, Array]:
         """Goal pose at times t (B,) s: Theta (B, d, d), b (B, d). Static goals return the reset pose."""
@@ -299,7 +242,7 @@ class Scenario:
 
     def param_vector(self, params: dict[str, Array]) -> Array:
         """Scenario parameters for the global state, shape (B, k) (k = len(param_low))."""
-        return np.zeros((params["segments"].shape[0], 0))
+        return np.zeros((next(iter(params.values())).shape[0], 0))
 
     @property
     def param_low(self) -> Array:
@@ -311,16 +254,70 @@ class Scenario:
         """Upper bounds of ``param_vector``, shape (k,)."""
         return np.zeros(0)
 
+    def decode_params(self, pvec: Array) -> dict[str, Array]:
+        """The per-episode parameters a planner needs, from ``param_vector`` values (B, k) read back out of the
+        global state (the inverse of :meth:`param_vector` where it is one); none by default."""
+        return {}
+
+    def task_features(self, ctx: StepContext) -> Array:
+        """The ``task`` observation block of every leader, (B, n_l, k); none by default."""
+        return np.zeros((ctx.state.pos.shape[0], ctx.engine.n_l, 0))
+
+    def task_feature_bounds(self) -> tuple[Array, Array]:
+        """(low, high) of :meth:`task_features`' entries, each (k,)."""
+        return np.zeros(0), np.zeros(0)
+
     def is_success(self, goal_distance: Array, formation_error: Array) -> NDArray[np.bool_]:
         """Success at one sample: every agent within ``goal_tol`` of its goal and formation error below
         ``formation_tol``. goal_distance (B,) is the largest agent distance (m); returns (B,) bool."""
         return (goal_distance < self.goal_tol) & (formation_error < self.formation_tol)
 
-    # ---------------------------------------------------------------- helpers
-    def empty_obstacles(self, B: int) -> dict[str, Array]:
-        """Zero-size obstacle arrays of the right shapes."""
-        return {"segments": np.zeros((B, 0, 2, self.d)), "circles": np.zeros((B, 0, self.d + 1))}
+    def fit_world(self) -> None:
+        """Fit the world box to a large framework, or refuse the framework (FormationError).
 
+        With R = max_i |r_i| (m): a ``grows_world`` scenario whose box half-width h is below REACH R gets
+        h' = REACH R + h per axis (every pose it draws stays inside); the others have obstacles sized for
+        formations of a few metres and refuse a framework wider than half their box.
+        """
+        reach = float(np.max(np.linalg.norm(self.r, axis=1)))
+        half = self.bounds[1]
+        if self.grows_world:
+            if REACH * reach > float(np.min(half)):
+                grown = REACH * reach + half
+                self.bounds = np.stack([-grown, grown]).astype(np.float64)
+            return
+        span = np.ptp(self.r, axis=0)
+        if np.any(span > half):
+            raise FormationError(
+                f"scenario {self.name!r} has obstacles in a world of {' x '.join(f'{2 * h:g}' for h in half)} m, "
+                f"sized for formations of a few metres; the framework {self.fw.name or '(custom)'} spans "
+                f"{' x '.join(f'{s:.3g}' for s in span)} m: scale its positions (Framework(fw.positions * s, "
+                "fw.edges, fw.leaders): the stress stays valid), or use a scenario whose world grows"
+            )
+
+    # ---------------------------------------------------------------- resets
+    def reset(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
+        """B episodes from one generator: the params of :meth:`build` with ``start`` (B, n, d). Each draw of
+        :meth:`draws` is one generator call for all B episodes, in order; then the followers' noise is redrawn
+        (for the episodes whose agents start too close) one draw per episode a round."""
+        raw = self._plan.draw(rng, B)
+        params, pose = self.build(raw)
+        if pose is not None:
+            params["start"] = self._place_start(pose, raw, lambda todo: self._noise_plan.draw(rng, todo.size))
+        return params
+
+    def reset_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
+        """One episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` (the same draws; the
+        geometry runs once for all episodes). The generators must be distinct objects."""
+        raw = self._plan.draw_each(rngs)
+        params, pose = self.build(raw)
+        if pose is not None:
+            params["start"] = self._place_start(
+                pose, raw, lambda todo: self._noise_plan.draw_each([rngs[b] for b in todo.tolist()])
+            )
+        return params
+
+    # ---------------------------------------------------------------- helpers
     def follower_draws(self) -> list[Draw]:
         """The followers' start noise, the last draws of an episode: directions ``_dirs`` (n_f, d)
         standard normal, radii ``_u`` (n_f,) uniform in [0, 1]; none without followers or noise."""
@@ -328,125 +325,79 @@ class Scenario:
             return []
         return list(self._noise_plan.draws)
 
-    @property
-    def compiled_draws(self) -> bool:
-        """Whether :meth:`reset_each` makes every draw in compiled code (numba, a plan without sign draws): then
-        it is also the quicker way to draw one episode, with the numbers of ``reset(rng, 1)`` (tests)."""
-        return _kernel.DRAWS and type(self).draws is not Scenario.draws and self._plan.runs is not None
-
     @functools.cached_property
     def _plan(self) -> DrawPlan:
-        """The layout of :meth:`draws` (built once)."""
         return DrawPlan(self.draws())
 
     @functools.cached_property
     def _noise_plan(self) -> DrawPlan:
-        """The followers' noise draws (:meth:`follower_draws`, whatever ``follower_noise``), for the redraws."""
         nf = len(self.fw.followers)
         return DrawPlan([Draw("_dirs", (nf, self.d), "normal"), Draw("_u", (nf,))])
 
-    @functools.cached_property
-    def _pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
-        """All agent pairs (i < j) as index arrays."""
-        iu, ju = np.triu_indices(self.fw.n, 1)
-        return iu, ju
-
-    @functools.cached_property
-    def _followers(self) -> NDArray[np.intp] | slice:
-        """The followers' indices: a slice when they are consecutive (a view, cheaper than fancy indexing)."""
-        f = np.asarray(self.fw.followers, dtype=np.intp)
-        if f.size and np.array_equal(f, np.arange(f[0], f[0] + f.size)):
-            return slice(int(f[0]), int(f[0]) + f.size)
-        return f
-
-    @functools.cached_property
-    def _follower_index(self) -> NDArray[np.int64]:
-        """The followers' indices as an int64 array (for :func:`_kernel.noisy_starts`)."""
-        return np.asarray(self.fw.followers, dtype=np.int64)
-
-    def _noisy(
-        self, out: Array, base: Array, todo: NDArray[np.intp], noise: dict[str, Array], follower_noise: float
-    ) -> NDArray[np.bool_]:
-        """Move the followers of episodes ``todo`` (m,) from ``base`` (B, n, d) by their noise draws
-        ``noise["_dirs"]`` (m, n_f, d) and ``noise["_u"]`` (m, n_f) (:meth:`follower_draws`), within a ball of
-        ``follower_noise`` m: each along its direction, by ``follower_noise`` u^(1/d). The episodes whose agents
-        are then no two closer than 3 radii get these positions in ``out`` (B, n, d); returns that test (m,).
-
-        Compiled per episode (``_kernel.noisy_starts``, the same operations) up to ``ALL_PAIRS_GAP_UP_TO``
-        agents when numba is there; numpy otherwise, and a k-d tree for larger swarms."""
+    def _noisy(self, out: Array, base: Array, todo: NDArray[np.intp], noise: dict[str, Array]) -> NDArray[np.bool_]:
+        """Move the followers of episodes ``todo`` (m,) from ``base`` (B, n, d) along their noise directions
+        ``noise["_dirs"]`` (m, n_f, d) by ``follower_noise`` u^(1/d) (u = ``noise["_u"]`` (m, n_f)): uniform in
+        a ball. The episodes whose agents are then no two closer than 3 radii get these positions in ``out``;
+        returns that test (m,)."""
         dirs = noise["_dirs"]
-        rad = follower_noise * _root(noise["_u"], self.d)
-        gap3 = 3.0 * self.agent_radius
-        if _kernel.AVAILABLE and self.fw.n <= ALL_PAIRS_GAP_UP_TO:
-            return _kernel.noisy_starts(
-                out, base, todo, np.ascontiguousarray(dirs), np.ascontiguousarray(rad), self._follower_index, gap3
-            )
-        # norms as np.linalg.norm computes them, without its overhead
-        dirs = dirs / np.sqrt(np.add.reduce(dirs * dirs, axis=-1, keepdims=True))
+        dirs = dirs / np.sqrt(np.sum(dirs * dirs, axis=-1, keepdims=True))
+        rad = self.follower_noise * _root(noise["_u"], self.d)
         trial = base[todo]
-        trial[:, self._followers] += dirs * rad[:, :, None]
+        trial[:, list(self.fw.followers)] += dirs * rad[:, :, None]
+        gap3 = 3.0 * self.agent_radius
         if self.fw.n > ALL_PAIRS_GAP_UP_TO:  # large swarms: a k-d tree finds the close pairs in O(n log n)
             from scipy.spatial import cKDTree
 
             ok = np.array([not cKDTree(t).query_pairs(gap3, output_type="ndarray").size for t in trial], dtype=bool)
         else:
-            iu, ju = self._pairs
+            iu, ju = np.triu_indices(self.fw.n, 1)
             diff = trial[:, iu] - trial[:, ju]
-            ok = np.sqrt(np.add.reduce(diff * diff, axis=-1).min(axis=1)) >= gap3
+            ok = np.sqrt(np.sum(diff * diff, axis=-1).min(axis=1, initial=np.inf)) >= gap3
         out[todo[ok]] = trial[ok]
         return ok
 
-    def _settle(
-        self,
-        base: Array,
-        noise: dict[str, Array],
-        redraw: Callable[[NDArray[np.intp]], dict[str, Array]],
-        follower_noise: float,
-        tries: int,
-    ) -> Array:
-        """Start positions (B, n, d): ``base`` with the followers moved by the noise draws ``noise`` of all B
-        episodes (:meth:`_noisy`). Episodes whose agents would start closer than 3 radii draw again, one draw per
-        episode a round (``redraw(episodes)``: the noise draws of those episodes), ``tries`` draws in all; those
-        still too close keep zero noise."""
-        out = base.copy()
-        todo = np.arange(base.shape[0])
-        todo = todo[~self._noisy(out, base, todo, noise, follower_noise)]
-        for _ in range(tries - 1):
-            if todo.size == 0:
-                break
-            todo = todo[~self._noisy(out, base, todo, redraw(todo), follower_noise)]
-        return out
-
     def _place_start(
-        self,
-        pose: tuple[Array, Array],
-        raw: dict[str, Array],
-        redraw: Callable[[NDArray[np.intp]], dict[str, Array]],
+        self, pose: tuple[Array, Array], raw: dict[str, Array], redraw: Callable[[NDArray[np.intp]], dict[str, Array]]
     ) -> Array:
-        """Start positions (B, n, d) on ``pose`` = (Theta0, b0), followers moved by the noise of the draws
-        ``_dirs``, ``_u`` (:meth:`follower_draws`; none: no noise) and, where agents start closer than 3 radii,
-        of ``redraw`` (:meth:`_settle`, ``start_tries`` draws in all)."""
+        """Start positions (B, n, d): leaders on ``pose`` = (Theta0, b0) at rest, followers there moved by the
+        noise draws ``_dirs``, ``_u`` of ``raw`` (none: no noise). Episodes whose agents would start closer than
+        3 radii draw again (``redraw(episodes)``), ``start_tries`` draws in all; those still too close keep
+        zero noise."""
         base = affine_batch(self.r, *pose)
         if "_u" not in raw:
             return base
-        return self._settle(base, raw, redraw, self.follower_noise, self.start_tries)
+        out = base.copy()
+        todo = np.arange(base.shape[0])
+        noise = raw
+        for _ in range(self.start_tries):
+            todo = todo[~self._noisy(out, base, todo, noise)]
+            if todo.size == 0:
+                break
+            noise = redraw(todo)
+        return out
 
-    def start_positions(
-        self, rng: np.random.Generator, theta: Array, b: Array, follower_noise: float, tries: int = 20
-    ) -> Array:
-        """Leaders on the pose (theta, b), followers there plus uniform noise in a ball of ``follower_noise`` m.
 
-        Draws again (for the offending episodes only) while two agents would start
-        closer than 3 agent radii; after ``tries`` draws those keep zero noise.
-        Returns shape (B, n, d).
-        """
-        base = affine_batch(self.r, theta, b)
-        if follower_noise <= 0 or len(self.fw.followers) == 0 or tries < 1:
-            return base
-        plan = self._noise_plan
-        return self._settle(
-            base, plan.draw(rng, base.shape[0]), lambda todo: plan.draw(rng, todo.size), follower_noise, tries
-        )
+def _positive(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise TypeError(f"{name} must be a positive number, got {type(value).__name__}")
+    if not (math.isfinite(value) and value > 0):
+        raise FormationError(f"{name} must be positive and finite, got {value}")
+    return float(value)
+
+
+def check_range(name: str, value: Any, lo: float = -math.inf, hi: float = math.inf) -> tuple[float, float]:
+    """A scenario's (low, high) keyword range as floats: finite, low <= high, within [lo, hi]."""
+    try:
+        a, b = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise TypeError(f"{name} must be a (low, high) pair of numbers, got {value!r}") from None
+    if not (math.isfinite(a) and math.isfinite(b)):
+        raise FormationError(f"{name} must be finite, got ({a}, {b})")
+    if a > b:
+        raise FormationError(f"{name} must have low <= high, got ({a}, {b})")
+    if a < lo or b > hi:
+        raise FormationError(f"{name} must lie in [{lo}, {hi}], got ({a}, {b})")
+    return a, b
 
 
 class Draw(NamedTuple):
@@ -498,11 +449,6 @@ class DrawPlan:
             k += size
         self.K = k
         self.calls = [(str(c[0]), int(c[1]), int(c[2])) for c in calls]
-        #: the calls as rows [kind (0 uniform, 1 normal), start, stop] for ``_kernel.draw_runs``; None with sign draws
-        self.runs: NDArray[np.int64] | None = None
-        if all(c[0] != "sign" for c in self.calls):
-            code = {"uniform": 0, "normal": 1}
-            self.runs = np.array([(code[c[0]], c[1], c[2]) for c in self.calls], dtype=np.int64).reshape(-1, 3)
         lo_a, span_a = np.array(lo), np.array(span)
         kinds = np.array(
             [dr.kind for dr in self.draws for _ in range(self.cols[dr.name].start, self.cols[dr.name].stop)]
@@ -527,29 +473,23 @@ class DrawPlan:
                 out[dr.name] = rng.choice([-1.0, 1.0], size=size)
         return out
 
-    def draw_each(
-        self, rngs: Sequence[np.random.Generator], bits: tuple[NDArray[np.int64], NDArray[np.int64]] | None = None
-    ) -> dict[str, Array]:
-        """One episode per generator: entry b equals ``draw(rngs[b], 1)``. With ``bits`` (``_kernel.bit_generators``
-        of ``rngs``, for plans without sign draws) every call is compiled (``_kernel.draw_runs``); else the Python
-        work per generator is one call per run of same-kind draws, each run drawn from every generator in turn
-        (distinct generators: each still makes its calls in the plan's order)."""
+    def draw_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
+        """One episode per generator: entry b equals ``draw(rngs[b], 1)``: per generator one call per run of
+        same-kind draws, each run drawn from every generator in turn (distinct generators: each still makes
+        its calls in the plan's order)."""
         B = len(rngs)
         raw = np.zeros((B, self.K))
-        if bits is not None and self.runs is not None:
-            _kernel.draw_runs(raw, *bits, self.runs)
-        else:
-            for kind, a, b in self.calls:
-                rows = raw[:, a:b]
-                if kind == "uniform":
-                    for g, row in zip(rngs, rows, strict=True):
-                        g.random(out=row)
-                elif kind == "normal":
-                    for g, row in zip(rngs, rows, strict=True):
-                        g.standard_normal(out=row)
-                else:
-                    for g, row in zip(rngs, rows, strict=True):
-                        row[:] = g.integers(0, 2, size=b - a)
+        for kind, a, b in self.calls:
+            rows = raw[:, a:b]
+            if kind == "uniform":
+                for g, row in zip(rngs, rows, strict=True):
+                    g.random(out=row)
+            elif kind == "normal":
+                for g, row in zip(rngs, rows, strict=True):
+                    g.standard_normal(out=row)
+            else:
+                for g, row in zip(rngs, rows, strict=True):
+                    row[:] = g.integers(0, 2, size=b - a)
         if self._sign.size:
             raw[:, self._sign] = 2.0 * raw[:, self._sign] - 1.0  # choice([-1, 1]) picks index integers(0, 2)
         for cols, lo, span in self._scaled:

@@ -23,9 +23,9 @@ import numpy as np
 
 from formation_env.core.errors import FormationError
 
-from ._base import Array, Draw, Scenario, rotation_2d, rotation_3d
+from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
 
-__all__ = ["Hold", "make"]
+__all__ = ["Hold"]
 
 PAPER_FOLLOWER_START = np.array([[-4.0, 3.0], [-3.0, -2.0]])
 
@@ -36,6 +36,8 @@ class Hold(Scenario):
     name: ClassVar[str] = "hold"
     dims: ClassVar[tuple[int, ...]] = (2, 3)
     half_size: ClassVar[tuple[float, ...]] = (5.0, 5.0, 5.0)
+    grows_world: ClassVar[bool] = True
+    planner: ClassVar[str | None] = "agents.planner:HoldPlanner"
     weights: ClassVar[dict[str, float]] = {"distance": 0.1}
     goal_tol_default: ClassVar[float] = 0.15
     hold_steps_default: ClassVar[int] = 10
@@ -46,11 +48,11 @@ class Hold(Scenario):
             raise FormationError(f"hold: start must be 'random' or 'paper', got {self.start!r}")
         if self.start == "paper" and (self.fw.n, self.d, self.fw.leaders) != (5, 2, (0, 1, 2)):
             raise FormationError("hold: start='paper' needs the paper's 5-agent framework (framework='paper')")
-        self.start_b = tuple(kw.pop("start_b", (-1.0, 1.0)))
-        self.goal_b = tuple(kw.pop("goal_b", (-2.0, 2.0)))
-        self.goal_angle = tuple(kw.pop("goal_angle", (-np.pi / 2, np.pi / 2)))
-        self.goal_scale = tuple(kw.pop("goal_scale", (0.6, 1.4)))
-        self.goal_shear = tuple(kw.pop("goal_shear", (-0.3, 0.3)))
+        self.start_b = check_range("start_b", kw.pop("start_b", (-1.0, 1.0)))
+        self.goal_b = check_range("goal_b", kw.pop("goal_b", (-2.0, 2.0)))
+        self.goal_angle = check_range("goal_angle", kw.pop("goal_angle", (-np.pi / 2, np.pi / 2)))
+        self.goal_scale = check_range("goal_scale", kw.pop("goal_scale", (0.6, 1.4)))
+        self.goal_shear = check_range("goal_shear", kw.pop("goal_shear", (-0.3, 0.3)))
         self.follower_noise = float(kw.pop("follower_noise", 0.3))
 
     def draws(self) -> list[Draw]:
@@ -78,15 +80,10 @@ class Hold(Scenario):
         sh = np.broadcast_to(np.eye(d), (B, d, d)).copy()
         sh[:, 0, 1] = raw["shear"]
         thg = rot_g @ sh @ (raw["scale"][:, :, None] * np.eye(d))
-        params = {"goal_theta": thg, "goal_b": raw["b_g"], **self.empty_obstacles(B)}
+        params = {"goal_theta": thg, "goal_b": raw["b_g"]}
         if self.start == "paper":
             start = np.broadcast_to(self.r, (B, 5, 2)).copy()
             start[:, 3:] = PAPER_FOLLOWER_START
             params.update(start=start, goal_theta=np.broadcast_to(np.eye(2), (B, 2, 2)).copy(), goal_b=np.zeros((B, 2)))
             return params, None
         return params, (th0, raw["b0"])
-
-
-def make(fw: Any, **kwargs: Any) -> Hold:
-    """Build the scenario for framework ``fw`` (keyword arguments: see :class:`Hold`)."""
-    return Hold(fw, **kwargs)

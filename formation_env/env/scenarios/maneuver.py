@@ -28,9 +28,9 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ._base import Array, Draw, Scenario, rotation_2d, rotation_3d
+from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
 
-__all__ = ["WINDOWS", "Maneuver", "make", "smoothstep"]
+__all__ = ["WINDOWS", "Maneuver", "smoothstep"]
 
 #: Ramp windows as fractions of the horizon: translate, rotate, scale, shear.
 WINDOWS: dict[str, tuple[float, float]] = {
@@ -55,15 +55,17 @@ class Maneuver(Scenario):
     moving_goal: ClassVar[bool] = True
     terminate_on_success: ClassVar[bool] = False
     half_size: ClassVar[tuple[float, ...]] = (10.0, 10.0, 10.0)
+    grows_world: ClassVar[bool] = True
+    planner: ClassVar[str | None] = "agents.planner:ManeuverPlanner"
     weights: ClassVar[dict[str, float]] = {"progress": 0.0, "distance": 1.0, "success": 0.0}
     goal_tol_default: ClassVar[float] = 0.3
 
     def _init(self, kw: dict[str, Any]) -> None:
-        self.offset_length = tuple(kw.pop("offset_length", (2.0, 5.0)))
-        self.rotation = tuple(kw.pop("rotation", (np.pi / 4, np.pi / 2)))
-        self.scale = tuple(kw.pop("scale", (0.6, 1.4)))
-        self.shear = tuple(kw.pop("shear", (-0.5, 0.5)))
-        self.start_b = tuple(kw.pop("start_b", (-1.0, 1.0)))
+        self.offset_length = check_range("offset_length", kw.pop("offset_length", (2.0, 5.0)))
+        self.rotation = check_range("rotation", kw.pop("rotation", (np.pi / 4, np.pi / 2)))
+        self.scale = check_range("scale", kw.pop("scale", (0.6, 1.4)))
+        self.shear = check_range("shear", kw.pop("shear", (-0.5, 0.5)))
+        self.start_b = check_range("start_b", kw.pop("start_b", (-1.0, 1.0)))
         self.follower_noise = float(kw.pop("follower_noise", 0.05))
         self._win = {k: (a * self.horizon, b * self.horizon) for k, (a, b) in WINDOWS.items()}
 
@@ -99,7 +101,6 @@ class Maneuver(Scenario):
             params["theta0"] = rotation_3d(raw["axis0"], raw["angle0"])
             params["axis"] = raw["axis"]
         pose = self.reference(params, np.zeros(B))
-        params.update(self.empty_obstacles(B))
         return params, pose
 
     def reference(self, params: dict[str, Array], t: Array) -> tuple[Array, Array]:
@@ -112,8 +113,3 @@ class Maneuver(Scenario):
         theta[:, 0, :] += (params["shear"] * smoothstep(t, *w["shear"]))[:, None] * theta[:, 1, :]  # Sh
         b = params["b0"] + smoothstep(t, *w["translate"])[:, None] * params["offset"]
         return theta, b
-
-
-def make(fw: Any, **kwargs: Any) -> Maneuver:
-    """Build the scenario for framework ``fw`` (keyword arguments: see :class:`Maneuver`)."""
-    return Maneuver(fw, **kwargs)

@@ -11,7 +11,7 @@ from typing import Any, ClassVar
 
 from .maneuver import Maneuver
 
-__all__ = ["Maneuver3D", "make"]
+__all__ = ["Maneuver3D"]
 
 
 class Maneuver3D(Maneuver):
@@ -20,8 +20,3 @@ class Maneuver3D(Maneuver):
     name: ClassVar[str] = "maneuver_3d"
     dims: ClassVar[tuple[int, ...]] = (3,)
     default_framework: ClassVar[str] = "bipyramid_3d"
-
-
-def make(fw: Any, **kwargs: Any) -> Maneuver3D:
-    """Build the scenario for framework ``fw`` (keyword arguments: see :class:`.maneuver.Maneuver`)."""
-    return Maneuver3D(fw, **kwargs)

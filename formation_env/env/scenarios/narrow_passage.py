@@ -19,8 +19,13 @@ segment or its step crosses one. Success: no contact so far and, at one sample, 
 within ``goal_tol`` = 0.2 m of its goal position Theta_g r_i + b_g and the affine-image
 formation error below ``formation_tol`` = 0.05 m. The episode then terminates.
 
-:func:`scripted_action` is a reference policy (move to the gap, shrink, pass, restore, go
-to the goal) used by the tests to show every episode is solvable.
+``agents.scripted.passage_action`` is a reference policy (move to the gap, shrink, pass, restore, go to
+the goal) used by the tests to show every episode is solvable; ``agents.planner.PassagePlanner`` the tuned
+analytic planner.
+
+Task features (the optional ``task`` observation block, per leader, m): the wall's x minus the leader's
+x, the gap centre's y minus the formation's fitted b_y, and the gap's half-width minus the formation's
+half-extent along y with the discs (the room left; negative: the formation must shrink to pass).
 """
 
 from __future__ import annotations
@@ -30,12 +35,13 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import numpy as np
 
-from ._base import Array, Draw, Scenario, affine_batch, rotation_2d
+from ..obstacles import Segment
+from ._base import Array, Draw, Scenario, check_range, rotation_2d
 
 if TYPE_CHECKING:
-    from ..engine import Engine, EngineState
+    from ..state import StepContext
 
-__all__ = ["NarrowPassage", "make", "scripted_action"]
+__all__ = ["NarrowPassage"]
 
 
 class NarrowPassage(Scenario):
@@ -43,16 +49,18 @@ class NarrowPassage(Scenario):
 
     name: ClassVar[str] = "narrow_passage"
     half_size: ClassVar[tuple[float, ...]] = (7.0, 5.0)
+    obstacle_types = (Segment,)
+    planner: ClassVar[str | None] = "agents.planner:PassagePlanner"
 
     def _init(self, kw: dict[str, Any]) -> None:
-        self.wall_x = tuple(kw.pop("wall_x", (-0.5, 0.5)))
-        self.gap_center = tuple(kw.pop("gap_center", (-1.0, 1.0)))
-        self.gap_width = tuple(kw.pop("gap_width", (1.0, 1.6)))
-        self.start_x = tuple(kw.pop("start_x", (-4.5, -3.5)))
-        self.start_y = tuple(kw.pop("start_y", (-1.5, 1.5)))
-        self.goal_x = tuple(kw.pop("goal_x", (3.5, 4.5)))
-        self.goal_y = tuple(kw.pop("goal_y", (-1.5, 1.5)))
-        self.angle = tuple(kw.pop("angle", (-np.pi / 12, np.pi / 12)))
+        self.wall_x = check_range("wall_x", kw.pop("wall_x", (-0.5, 0.5)))
+        self.gap_center = check_range("gap_center", kw.pop("gap_center", (-1.0, 1.0)))
+        self.gap_width = check_range("gap_width", kw.pop("gap_width", (1.0, 1.6)), lo=1e-9)
+        self.start_x = check_range("start_x", kw.pop("start_x", (-4.5, -3.5)))
+        self.start_y = check_range("start_y", kw.pop("start_y", (-1.5, 1.5)))
+        self.goal_x = check_range("goal_x", kw.pop("goal_x", (3.5, 4.5)))
+        self.goal_y = check_range("goal_y", kw.pop("goal_y", (-1.5, 1.5)))
+        self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
         self.follower_noise = float(kw.pop("follower_noise", 0.1))
         width = float(np.ptp(self.r[:, 1])) + 2 * self.agent_radius
         if width <= self.gap_width[1]:
@@ -90,7 +98,6 @@ class NarrowPassage(Scenario):
             "goal_theta": rotation_2d(raw["angle_g"]),
             "goal_b": bg,
             "segments": seg,
-            "circles": np.zeros((B, 0, 3)),
             "wall_x": wall,
             "gap_center": yc,
             "gap_width": w,
@@ -99,6 +106,9 @@ class NarrowPassage(Scenario):
 
     def param_vector(self, params: dict[str, Array]) -> Array:
         return np.stack([params["wall_x"], params["gap_center"], params["gap_width"]], -1)
+
+    def decode_params(self, pvec: Array) -> dict[str, Array]:
+        return {"wall_x": pvec[:, 0], "gap_center": pvec[:, 1], "gap_width": pvec[:, 2]}
 
     @property
     def param_low(self) -> Array:
@@ -109,50 +119,16 @@ class NarrowPassage(Scenario):
         return np.array([self.wall_x[1], self.gap_center[1], self.gap_width[1]])
 
 
-def make(fw: Any, **kwargs: Any) -> NarrowPassage:
-    """Build the scenario for framework ``fw`` (keyword arguments: see :class:`NarrowPassage`)."""
-    return NarrowPassage(fw, **kwargs)
+    def task_features(self, ctx: StepContext) -> Array:
+        p = ctx.state.params
+        eng = ctx.engine
+        pos = ctx.state.pos
+        half = 0.5 * (pos[:, :, 1].max(axis=1) - pos[:, :, 1].min(axis=1)) + self.agent_radius
+        per_env = np.stack([ctx.b[:, 1], p["gap_center"] - ctx.b[:, 1], 0.5 * p["gap_width"] - half], axis=-1)
+        out = np.repeat(per_env[:, None, :], eng.n_l, axis=1)
+        out[:, :, 0] = p["wall_x"][:, None] - pos[:, eng.leaders, 0]
+        return out
 
-
-def scripted_action(engine: Engine, state: EngineState, margin: float = 0.1) -> Array:
-    """Reference policy, stateless and batched: shrink at the gap, pass, restore, go to the goal.
-
-    Per episode, with wall x_w, gap centre y_c and width w: the squeezed pose is
-    Theta_s = diag(1, s), s = (w - 2 radius - 2 margin) / ptp(r_y), b_y centring the
-    formation on the gap. Until every agent is past the wall (x > x_w + radius + margin)
-    the leaders track the squeezed pose, holding b_x in front of the wall until every
-    agent is within margin/2 of its squeezed y, then pushing b_x through; afterwards
-    they track the goal pose. Leaders follow their targets with :func:`track_targets`.
-
-    Returns:
-        actions in [-1, 1], shape (B, n_l, p).
-    """
-    from ..control import track_targets
-
-    sc = engine.scenario
-    r = sc.r
-    rad = sc.agent_radius
-    p = state.params
-    pos = state.pos
-    B = pos.shape[0]
-    ry = r[:, 1]
-    s = (p["gap_width"] - 2 * rad - 2 * margin) / np.ptp(ry)
-    by = p["gap_center"] - s * (ry.max() + ry.min()) / 2
-    ty = by[:, None] + s[:, None] * ry[None, :]  # squeezed y of every agent, (B, n)
-    aligned = np.max(np.abs(pos[:, :, 1] - ty), axis=1) < margin / 2
-    wall = p["wall_x"]
-    passed = pos[:, :, 0].min(axis=1) > wall + rad + margin
-    b_fit = engine.affine.fit(pos)[1]
-    entering = pos[:, :, 0].max(axis=1) > wall - 0.4
-    bx = np.where(
-        aligned,
-        wall - r[:, 0].min() + rad + 3 * margin,
-        np.where(entering, b_fit[:, 0], wall - r[:, 0].max() - 0.6),
-    )
-    theta_s = np.zeros((B, 2, 2))
-    theta_s[:, 0, 0] = 1.0
-    theta_s[:, 1, 1] = s
-    squeeze = affine_batch(r, theta_s, np.stack([bx, by], -1))
-    goal = affine_batch(r, p["goal_theta"], p["goal_b"])
-    targets = np.where(passed[:, None, None], goal, squeeze)
-    return track_targets(engine, state, targets[:, engine.leaders])
+    def task_feature_bounds(self) -> tuple[Array, Array]:
+        ext = self.bounds[1] - self.bounds[0]
+        return -ext[[0, 1, 1]], ext[[0, 1, 1]]

@@ -20,9 +20,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from ._base import Array, Draw, Scenario, rotation_2d, rotation_3d
+from formation_env.core.errors import FormationError
 
-__all__ = ["ObstacleField", "make"]
+from ..obstacles import Circle
+from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
+
+__all__ = ["ObstacleField"]
 
 
 class ObstacleField(Scenario):
@@ -31,16 +34,21 @@ class ObstacleField(Scenario):
     name: ClassVar[str] = "obstacle_field"
     dims: ClassVar[tuple[int, ...]] = (2, 3)
     half_size: ClassVar[tuple[float, ...]] = (7.0, 5.0, 5.0)
+    obstacle_types = (Circle,)
+    planner: ClassVar[str | None] = "agents.planner:FieldPlanner"
 
     def _init(self, kw: dict[str, Any]) -> None:
-        self.n_obstacles = int(kw.pop("n_obstacles", 6))
-        self.obstacle_x = tuple(kw.pop("obstacle_x", (-1.5, 1.0)))
-        self.obstacle_y = tuple(kw.pop("obstacle_y", (-4.0, 4.0)))
-        self.obstacle_radius = tuple(kw.pop("obstacle_radius", (0.3, 0.6)))
-        self.start_x = tuple(kw.pop("start_x", (-4.5, -4.0)))
-        self.goal_x = tuple(kw.pop("goal_x", (4.0, 4.5)))
-        self.lateral = tuple(kw.pop("lateral", (-1.5, 1.5)))
-        self.angle = tuple(kw.pop("angle", (-np.pi / 12, np.pi / 12)))
+        n_obs = kw.pop("n_obstacles", 6)
+        if isinstance(n_obs, bool) or not isinstance(n_obs, (int, np.integer)) or n_obs < 0:
+            raise FormationError(f"obstacle_field: n_obstacles must be an integer >= 0, got {n_obs!r}")
+        self.n_obstacles = int(n_obs)
+        self.obstacle_x = check_range("obstacle_x", kw.pop("obstacle_x", (-1.5, 1.0)))
+        self.obstacle_y = check_range("obstacle_y", kw.pop("obstacle_y", (-4.0, 4.0)))
+        self.obstacle_radius = check_range("obstacle_radius", kw.pop("obstacle_radius", (0.3, 0.6)), lo=0.0)
+        self.start_x = check_range("start_x", kw.pop("start_x", (-4.5, -4.0)))
+        self.goal_x = check_range("goal_x", kw.pop("goal_x", (4.0, 4.5)))
+        self.lateral = check_range("lateral", kw.pop("lateral", (-1.5, 1.5)))
+        self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
         self.follower_noise = float(kw.pop("follower_noise", 0.1))
 
     def draws(self) -> list[Draw]:
@@ -70,13 +78,15 @@ class ObstacleField(Scenario):
         params = {
             "goal_theta": self._rotation(raw["angle_g"]),
             "goal_b": bg,
-            "segments": np.zeros((circles.shape[0], 0, 2, self.d)),
             "circles": circles,
         }
         return params, (self._rotation(raw["angle0"]), b0)
 
     def param_vector(self, params: dict[str, Array]) -> Array:
         return params["circles"].reshape(params["circles"].shape[0], -1)
+
+    def decode_params(self, pvec: Array) -> dict[str, Array]:
+        return {"circles": pvec.reshape(pvec.shape[0], -1, self.d + 1)}
 
     @property
     def param_low(self) -> Array:
@@ -87,8 +97,3 @@ class ObstacleField(Scenario):
     def param_high(self) -> Array:
         hi = [self.obstacle_x[1]] + [self.obstacle_y[1]] * (self.d - 1) + [self.obstacle_radius[1]]
         return np.tile(hi, self.n_obstacles).astype(np.float64)
-
-
-def make(fw: Any, **kwargs: Any) -> ObstacleField:
-    """Build the scenario for framework ``fw`` (keyword arguments: see :class:`ObstacleField`)."""
-    return ObstacleField(fw, **kwargs)

@@ -1,0 +1,106 @@
+"""Rewards as registered terms: name, default weight, and a function of one step's context.
+
+Leader i's reward is sum_t w_t term_t(ctx)_i over the registered terms (:data:`REWARD_TERMS`), with the
+weights of :data:`DEFAULT_WEIGHTS`, then the scenario's (``Scenario.weights``), then the caller's
+(``reward_weights=``). A term returns (B, n_l) (per leader) or (B,) (shared by the team); its sign is in
+the term, so weights are magnitudes. A term of weight 0 is not computed. A new term is one
+:func:`reward_term` decoration.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
+
+if TYPE_CHECKING:
+    from .state import StepContext
+
+__all__ = ["DEFAULT_WEIGHTS", "REWARD_TERMS", "TERMS", "RewardTerm", "reward_table", "reward_term", "total_reward"]
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class RewardTerm:
+    """A reward term: ``fn(ctx)`` (B, n_l) or (B,), its default weight, one line of meaning (with the sign)."""
+
+    name: str
+    weight: float
+    fn: Callable[[StepContext], Array]
+    meaning: str
+
+
+#: Every registered term, by name.
+TERMS: dict[str, RewardTerm] = {}
+
+
+def reward_term(name: str, weight: float, meaning: str) -> Callable[[Callable[[StepContext], Array]], RewardTerm]:
+    """Register the decorated function as reward term ``name`` with default ``weight``."""
+
+    def add(fn: Callable[[StepContext], Array]) -> RewardTerm:
+        if name in TERMS:
+            raise ValueError(f"reward term {name!r} is registered already")
+        TERMS[name] = term = RewardTerm(name, float(weight), fn, meaning)
+        return term
+
+    return add
+
+
+@reward_term("progress", 1.0, "g_i(k) - g_i(k+1): the leader's approach to its goal position (m)")
+def _progress(ctx: StepContext) -> Array:
+    assert ctx.prev is not None
+    return ctx.prev.goal_dist - ctx.state.goal_dist
+
+
+@reward_term("distance", 0.0, "-T g_i(k+1): the leader's distance to its goal, per second (m s)")
+def _distance(ctx: StepContext) -> Array:
+    return -ctx.engine.dt * ctx.state.goal_dist
+
+
+@reward_term("formation", 1.0, "-T e(k+1): the affine-image formation error, per second (m s)")
+def _formation(ctx: StepContext) -> Array:
+    return -ctx.engine.dt * ctx.state.err
+
+
+@reward_term("effort", 0.01, "-T |a_i|^2 / p: the squared clipped action, per input and second (s)")
+def _effort(ctx: StepContext) -> Array:
+    a = ctx.actions
+    return -(ctx.engine.dt / a.shape[-1]) * np.einsum("blp,blp->bl", a, a)
+
+
+@reward_term("collision", 10.0, "-1 on a collision (agents, obstacles, leaving the world box)")
+def _collision(ctx: StepContext) -> Array:
+    return -ctx.collision.astype(np.float64)
+
+
+@reward_term("success", 10.0, "+1 on success")
+def _success(ctx: StepContext) -> Array:
+    return ctx.success.astype(np.float64)
+
+
+#: Names of the registered terms, in order.
+REWARD_TERMS: tuple[str, ...] = tuple(TERMS)
+#: Default weights of the registered terms.
+DEFAULT_WEIGHTS: dict[str, float] = {t.name: t.weight for t in TERMS.values()}
+
+
+def total_reward(ctx: StepContext, weights: dict[str, float]) -> Array:
+    """sum_t w_t term_t for every leader, shape (B, n_l)."""
+    B, nl = ctx.state.goal_dist.shape
+    out = np.zeros((B, nl))
+    for name, w in weights.items():
+        if w != 0.0:
+            val = TERMS[name].fn(ctx)
+            out += w * (val if val.ndim == 2 else val[:, None])
+    return out
+
+
+def reward_table() -> str:
+    """The Markdown table of every registered term (the env's docstring holds it; a test compares)."""
+    rows = ["| term | default weight | value |", "|---|---|---|"]
+    rows += [f"| ``{t.name}`` | {t.weight:g} | {t.meaning} |" for t in TERMS.values()]
+    return "\n".join(rows)

@@ -1,0 +1,101 @@
+"""``moving_obstacles``: cross lanes of discs moving at constant velocity, restore the shape, reach the goal (2D).
+
+Geometry (metres and seconds, per episode drawn uniformly from the seed's generator; ranges are keyword
+arguments):
+
+* World box x in [-8, 8], y in [-5, 5]; an agent centre leaving it is a collision.
+* ``n_moving`` = 3 discs (:class:`~formation_env.env.obstacles.MovingCircle`), disc j in the lane x_j =
+  ``lanes``[j] + jitter, lanes evenly spaced over [-2, 2] (for 3 discs: -2, 0, 2), jitter in
+  [-0.15, 0.15]; radius in ``moving_radius`` = [0.3, 0.5]; start y in [-4, 4]; velocity (0, v_y), the
+  speed |v_y| in ``moving_speed`` = [0.5, 1.0] m/s with a random sign. A disc bounces elastically off the
+  world box (its rim against the box's faces: it turns at y = +-(5 - radius)), so it sweeps its lane up and
+  down for the whole episode with period 2 (10 - 2 radius) / |v_y|, 18-37 s.
+* Agents are discs of radius ``agent_radius`` (default 0.1).
+* Start pose: Theta0 = rotation(psi0), psi0 in [-pi/12, pi/12], b0 with x in [-5.5, -4.5], y in [-1, 1];
+  leaders at Theta0 r_l + b0 at rest, followers there plus up to 0.1 m noise. With the default (paper)
+  framework, r_x in [-2, 1], the start lies left of x = -3.3 and clear of every lane.
+* Goal pose: Theta_g = rotation(psi_g), psi_g in [-pi/12, pi/12], b_g with x in [5, 5.5], y in [-1, 1]: the
+  nominal shape, right of every lane (agents at x > 2.9).
+
+The team, about 3 m long and 2 m wide, cannot slip between two lanes: it must time its crossing between
+the discs' passes, shrinking (scaling) or rotating to narrow the band it sweeps, or wait for a gap.
+
+Contact: an agent touches a disc when its centre comes within ``agent_radius`` of the disc's rim, at a
+sample or along the step (the agent's motion relative to the moving disc). Success: no contact so far and,
+at one sample, every agent within ``goal_tol`` = 0.2 m of its goal position Theta_g r_i + b_g and the
+affine-image formation error below ``formation_tol`` = 0.05 m. The episode then terminates.
+
+``agents.scripted.crossing_action`` is a reference policy (shrink, wait until the whole crossing is
+predicted clear of every disc, cross, restore, go to the goal) that the tests run on seeded episodes to show
+they are solvable. The global state carries each disc's current centre, velocity and radius.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+import numpy as np
+
+from formation_env.core.errors import FormationError
+
+from ..obstacles import MovingCircle
+from ._base import Array, Draw, Scenario, check_range, rotation_2d
+
+__all__ = ["MovingObstacles"]
+
+
+class MovingObstacles(Scenario):
+    """Cross lanes of moving discs (see the module docstring for geometry and success)."""
+
+    name: ClassVar[str] = "moving_obstacles"
+    half_size: ClassVar[tuple[float, ...]] = (8.0, 5.0)
+    obstacle_types = (MovingCircle,)
+    planner: ClassVar[str | None] = "agents.planner:CrossingPlanner"
+
+    def _init(self, kw: dict[str, Any]) -> None:
+        n_m = kw.pop("n_moving", 3)
+        if isinstance(n_m, bool) or not isinstance(n_m, (int, np.integer)) or n_m < 1:
+            raise FormationError(f"moving_obstacles: n_moving must be an integer >= 1, got {n_m!r}")
+        self.n_moving = int(n_m)
+        self.lane_span = check_range("lane_span", kw.pop("lane_span", (-2.0, 2.0)), -8.0, 8.0)
+        self.lane_jitter = check_range("lane_jitter", kw.pop("lane_jitter", (-0.15, 0.15)))
+        self.moving_radius = check_range("moving_radius", kw.pop("moving_radius", (0.3, 0.5)), lo=1e-6, hi=2.0)
+        self.moving_speed = check_range("moving_speed", kw.pop("moving_speed", (0.5, 1.0)), 0.0, MovingCircle.max_speed)
+        self.moving_y = check_range("moving_y", kw.pop("moving_y", (-4.0, 4.0)), -5.0, 5.0)
+        self.start_x = check_range("start_x", kw.pop("start_x", (-5.5, -4.5)))
+        self.start_y = check_range("start_y", kw.pop("start_y", (-1.0, 1.0)))
+        self.goal_x = check_range("goal_x", kw.pop("goal_x", (5.0, 5.5)))
+        self.goal_y = check_range("goal_y", kw.pop("goal_y", (-1.0, 1.0)))
+        self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
+        self.follower_noise = float(kw.pop("follower_noise", 0.1))
+        m = self.n_moving
+        self.lanes = np.linspace(*self.lane_span, m) if m > 1 else np.array([np.mean(self.lane_span)])
+
+    def draws(self) -> list[Draw]:
+        m = self.n_moving
+        return [
+            Draw("lane_jitter", (m,), bounds=self.lane_jitter),
+            Draw("moving_y", (m,), bounds=self.moving_y),
+            Draw("moving_radius", (m,), bounds=self.moving_radius),
+            Draw("moving_speed", (m,), bounds=self.moving_speed),
+            Draw("moving_sign", (m,), "sign"),
+            Draw("start_x", bounds=self.start_x),
+            Draw("start_y", bounds=self.start_y),
+            Draw("angle0", bounds=self.angle),
+            Draw("goal_x", bounds=self.goal_x),
+            Draw("goal_y", bounds=self.goal_y),
+            Draw("angle_g", bounds=self.angle),
+            *self.follower_draws(),
+        ]
+
+    def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
+        B, m = raw["moving_y"].shape
+        discs = np.zeros((B, m, 5))  # c0 (2), v (2), radius
+        discs[:, :, 0] = self.lanes + raw["lane_jitter"]
+        discs[:, :, 1] = raw["moving_y"]
+        discs[:, :, 3] = raw["moving_speed"] * raw["moving_sign"]
+        discs[:, :, 4] = raw["moving_radius"]
+        b0 = np.stack([raw["start_x"], raw["start_y"]], -1)
+        bg = np.stack([raw["goal_x"], raw["goal_y"]], -1)
+        params = {"goal_theta": rotation_2d(raw["angle_g"]), "goal_b": bg, "moving_circles": discs}
+        return params, (rotation_2d(raw["angle0"]), b0)

@@ -17,7 +17,7 @@ import scipy.linalg as sla
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import ControlDimension, FormationError
-from .validation import as_array, check_shape
+from .validation import as_array, check_bool, check_dt, check_int, check_shape
 
 __all__ = ["LinearDynamics", "c2d_zoh", "dare", "dlqr", "riccati_gain"]
 
@@ -36,8 +36,7 @@ def c2d_zoh(A: ArrayLike, B: ArrayLike, dt: float) -> tuple[NDArray[np.float64],
     q = a.shape[0]
     check_shape(a, (q, q), "A")
     check_shape(b, (q, None), "B")
-    if not (np.isfinite(dt) and dt > 0):
-        raise FormationError(f"dt must be a positive finite sampling period in seconds, got {dt}")
+    dt = check_dt(dt)
     p = b.shape[1]
     m = np.zeros((q + p, q + p))
     m[:q, :q] = a
@@ -77,13 +76,25 @@ class LinearDynamics:
     ) -> None:
         a = as_array(A, "A", ndim=2)
         q = a.shape[0]
+        if q == 0:
+            raise ControlDimension("A must be a non-empty square matrix (q >= 1 states), got shape (0, 0)")
         check_shape(a, (q, q), "A")
         b = as_array(B, "B", ndim=2)
         check_shape(b, (q, None), "B")
+        if b.shape[1] == 0:
+            raise ControlDimension(f"B must have at least one input column, got shape {b.shape}")
+        if not isinstance(name, str):
+            raise TypeError(f"name must be a string, got {type(name).__name__}")
+        discrete = check_bool(discrete, "discrete")
         if np.linalg.matrix_rank(b) < b.shape[1]:
             raise FormationError(f"B must have full column rank ({b.shape[1]}), got rank {np.linalg.matrix_rank(b)}")
         c = np.eye(q) if C is None else as_array(C, "C", ndim=2)
         check_shape(c, (None, q), "C")
+        if c.shape[0] == 0 or np.linalg.matrix_rank(c) < c.shape[0]:
+            raise FormationError(
+                f"C must have full row rank (d = {c.shape[0]} >= 1 independent position outputs), got shape "
+                f"{c.shape} and rank {np.linalg.matrix_rank(c) if c.size else 0}"
+            )
         for name_, arr in (("A", a), ("B", b), ("C", c)):
             arr = arr.copy()
             arr.setflags(write=False)
@@ -95,11 +106,13 @@ class LinearDynamics:
     @classmethod
     def single_integrator(cls, d: int = 2) -> LinearDynamics:
         """xdot = u in R^d: state = position, input = velocity (m/s)."""
+        d = check_int(d, "d", low=1)
         return cls(np.zeros((d, d)), np.eye(d), np.eye(d), name="single_integrator")
 
     @classmethod
     def double_integrator(cls, d: int = 2) -> LinearDynamics:
         """pdot = v, vdot = u in R^d: state [p, v] (q = 2d), input = acceleration (m/s^2)."""
+        d = check_int(d, "d", low=1)
         a = np.zeros((2 * d, 2 * d))
         a[:d, d:] = np.eye(d)
         b = np.zeros((2 * d, d))
@@ -136,9 +149,10 @@ class LinearDynamics:
 
     def zoh(self, dt: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Sampled model (A_d, B_d) for period ``dt`` (s); cached."""
+        dt = check_dt(dt)
         if self.discrete:
             return self.A, self.B
-        return _zoh_cached(self, float(dt))
+        return _zoh_cached(self, dt)
 
     def position(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """Positions C x_i of states x, shape (..., q) -> (..., d)."""
@@ -150,8 +164,8 @@ class LinearDynamics:
         Args:
             pos: shape (..., d). Returns shape (..., q).
         """
-        p = np.asarray(pos, dtype=np.float64)
-        if p.shape[-1] != self.d:
+        p = as_array(pos, "pos")
+        if p.ndim == 0 or p.shape[-1] != self.d:
             raise ControlDimension(f"positions must end in d = {self.d}, got shape {p.shape}")
         return p @ np.linalg.pinv(self.C).T
 
@@ -159,6 +173,16 @@ class LinearDynamics:
         """One sampled step x(k+1) = A_d x + B_d u, batched: x (..., q), u (..., p)."""
         ad, bd = self.zoh(dt)
         return x @ ad.T + u @ bd.T
+
+
+def _check_spd(m: NDArray[np.float64], name: str) -> None:
+    """Raise FormationError unless ``m`` is symmetric positive definite."""
+    scale = float(np.max(np.abs(m))) if m.size else 0.0
+    if np.max(np.abs(m - m.T)) > 1e-10 * max(scale, 1.0):
+        raise FormationError(f"{name} must be symmetric positive definite, got max |{name} - {name}^T| = {np.max(np.abs(m - m.T)):.3g}")
+    lo = float(np.min(np.linalg.eigvalsh(m)))
+    if lo <= 0:
+        raise FormationError(f"{name} must be symmetric positive definite, got smallest eigenvalue {lo:.3g}")
 
 
 @lru_cache(maxsize=64)
@@ -187,12 +211,13 @@ def dare(A: ArrayLike, B: ArrayLike, Q: ArrayLike | None = None, R: ArrayLike | 
     p = b.shape[1]
     qm = np.eye(q) if Q is None else as_array(Q, "Q", ndim=2)
     check_shape(qm, (q, q), "Q")
-    if np.min(np.linalg.eigvalsh((qm + qm.T) / 2)) <= 0:
-        raise FormationError("Q must be symmetric positive definite")
+    _check_spd(qm, "Q")
     if np.linalg.matrix_rank(b) < p:
         raise FormationError(f"B must have full column rank {p} for the Riccati gain")
     rm = np.zeros((p, p)) if R is None else as_array(R, "R", ndim=2)
     check_shape(rm, (p, p), "R")
+    if R is not None:
+        _check_spd(rm, "R")
     try:
         P = sla.solve_discrete_are(a, b, qm, rm)
     except (np.linalg.LinAlgError, ValueError) as exc:
@@ -211,20 +236,32 @@ def riccati_gain(
     A: ArrayLike, B: ArrayLike, Q: ArrayLike | None = None, R: ArrayLike | None = None
 ) -> NDArray[np.float64]:
     """Gain K = -(R + B'PB)^-1 B'PA of :func:`dare` (R = None: the paper's K, Theorem 3), shape (p, q)."""
-    a = np.asarray(A, dtype=np.float64)
-    b = np.asarray(B, dtype=np.float64)
+    a = as_array(A, "A", ndim=2)
+    b = as_array(B, "B", ndim=2)
     P = dare(a, b, Q, R)
     p = b.shape[1]
-    rm = np.zeros((p, p)) if R is None else np.asarray(R, dtype=np.float64)
+    rm = np.zeros((p, p)) if R is None else as_array(R, "R", ndim=2)
     return np.asarray(-np.linalg.solve(rm + b.T @ P @ b, b.T @ P @ a), dtype=np.float64)
 
 
 def dlqr(
     A: ArrayLike, B: ArrayLike, Q: ArrayLike, R: ArrayLike
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.complex128]]:
-    """Discrete LQR as python-control: returns (K, P, E) for u = -K x, E the closed-loop eigenvalues."""
-    a = np.asarray(A, dtype=np.float64)
-    b = np.asarray(B, dtype=np.float64)
+    """Discrete LQR as python-control: returns (K, P, E) for u = -K x, E the closed-loop eigenvalues.
+
+    Args:
+        A: (q, q), B: (q, p), Q: (q, q) symmetric positive definite, R: (p, p) symmetric
+            positive definite (required: for the paper's cheap-control gain use :func:`riccati_gain`).
+    """
+    if Q is None:
+        raise TypeError("dlqr() needs Q, the (q, q) state weight (symmetric positive definite), got None")
+    if R is None:
+        raise TypeError(
+            "dlqr() needs R, the (p, p) input weight (symmetric positive definite), got None; "
+            "for the cheap-control limit R = 0 of Theorem 3 use riccati_gain(A, B, Q)"
+        )
+    a = as_array(A, "A", ndim=2)
+    b = as_array(B, "B", ndim=2)
     P = dare(a, b, Q, R)
-    K = np.linalg.solve(np.asarray(R, dtype=np.float64) + b.T @ P @ b, b.T @ P @ a)
+    K = np.linalg.solve(as_array(R, "R", ndim=2) + b.T @ P @ b, b.T @ P @ a)
     return np.asarray(K, dtype=np.float64), P, np.asarray(np.linalg.eigvals(a - b @ K), dtype=np.complex128)

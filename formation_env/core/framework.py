@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import FrameworkError
-from .validation import as_array
+from .errors import ControlDimension, FormationError, FrameworkError
+from .validation import as_array, as_index_array
 
 __all__ = ["Framework", "affine_rank", "check_leaders_span"]
 
@@ -48,14 +48,18 @@ def check_leaders_span(positions: NDArray[np.float64], leaders: Sequence[int]) -
 
 
 def _normalise_edges(edges: Iterable[Sequence[int]], n: int) -> tuple[tuple[int, int], ...]:
+    if edges is not None and not isinstance(edges, np.ndarray):
+        edges = list(edges)
+        for e in edges:
+            if np.ndim(e) != 1 or len(e) != 2:
+                raise FrameworkError(f"edge {e!r} must have two endpoints")
+    try:
+        arr = as_index_array(edges, "edges", n=n, ndim=2)
+    except (ControlDimension, FormationError) as exc:
+        raise FrameworkError(str(exc)) from exc
     out: list[tuple[int, int]] = []
     seen: set[tuple[int, int]] = set()
-    for e in edges:
-        if len(e) != 2:
-            raise FrameworkError(f"edge {tuple(e)} must have two endpoints")
-        i, j = int(e[0]), int(e[1])
-        if not (0 <= i < n and 0 <= j < n):
-            raise FrameworkError(f"edge ({i}, {j}) refers to an agent outside 0..{n - 1}")
+    for i, j in arr.tolist():
         if i == j:
             raise FrameworkError(f"edge ({i}, {j}) is a self-loop")
         key = (min(i, j), max(i, j))
@@ -75,6 +79,9 @@ class Framework:
         edges: undirected edges (i, j), i < j, sorted.
         leaders: indices of the leader agents (at least d + 1, affinely spanning R^d).
         name: optional label used in reports.
+        cliques: optional trilateration cliques, shape (n - d - 1, d + 2), integer: row j - d - 1
+            lists d + 1 pairwise-joined agents before j, then j (used by
+            ``design_stress(fw, "constructive")``; None: found from the edges in index order).
 
     Raises:
         FrameworkError: fewer than d + 2 agents, bad edges, duplicate or
@@ -85,6 +92,7 @@ class Framework:
     edges: tuple[tuple[int, int], ...]
     leaders: tuple[int, ...]
     name: str = ""
+    cliques: NDArray[np.int64] | None = None
     _followers: tuple[int, ...] = field(init=False, repr=False, compare=False)
 
     def __init__(
@@ -93,6 +101,7 @@ class Framework:
         edges: Iterable[Sequence[int]],
         leaders: Iterable[int],
         name: str = "",
+        cliques: ArrayLike | None = None,
     ) -> None:
         r = as_array(positions, "positions", ndim=2)
         n, d = r.shape
@@ -102,11 +111,15 @@ class Framework:
             raise FrameworkError(
                 f"a framework in R^{d} needs at least d + 2 = {d + 2} agents (d + 1 leaders and a follower), got {n}"
             )
-        lead = tuple(int(i) for i in leaders)
+        if not isinstance(name, str):
+            raise TypeError(f"name must be a string, got {type(name).__name__}")
+        try:
+            lead_arr = as_index_array(leaders, "leaders", n=n)
+        except (ControlDimension, FormationError) as exc:
+            raise FrameworkError(str(exc)) from exc
+        lead = tuple(int(i) for i in lead_arr)
         if len(set(lead)) != len(lead):
             raise FrameworkError(f"leaders {list(lead)} contain duplicates")
-        if any(not 0 <= i < n for i in lead):
-            raise FrameworkError(f"leaders {list(lead)} refer to agents outside 0..{n - 1}")
         if len(lead) >= n:
             raise FrameworkError("every agent is a leader: a framework needs at least one follower")
         check_leaders_span(r, lead)
@@ -116,6 +129,19 @@ class Framework:
         object.__setattr__(self, "edges", _normalise_edges(edges, n))
         object.__setattr__(self, "leaders", lead)
         object.__setattr__(self, "name", name)
+        if cliques is not None:
+            cl = as_index_array(np.asarray(cliques).ravel(), "cliques", n=n).reshape(-1, d + 2) if np.size(
+                cliques
+            ) % (d + 2) == 0 else None
+            if cl is None or np.ndim(cliques) != 2 or cl.shape[0] != n - d - 1:
+                raise ControlDimension(
+                    f"cliques must have shape (n - d - 1, d + 2) = ({n - d - 1}, {d + 2}), got {np.shape(cliques)}"
+                )
+            cl = cl.copy()
+            cl.setflags(write=False)
+            object.__setattr__(self, "cliques", cl)
+        else:
+            object.__setattr__(self, "cliques", None)
         lset = set(lead)
         object.__setattr__(self, "_followers", tuple(i for i in range(n) if i not in lset))
 

@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 from .dynamics import LinearDynamics, riccati_gain
 from .errors import ControlDimension, FormationError, UnstableParameterError
 from .stress import Partition
+from .validation import as_array, check_dt, check_dynamics, check_int, check_real_scalar
 
 __all__ = [
     "LAWS",
@@ -93,8 +94,10 @@ class FollowerLaw(ABC):
     tracks_targets: bool = True
 
     def __init__(self, part: Partition, dynamics: LinearDynamics, dt: float) -> None:
-        if not (np.isfinite(dt) and dt > 0):
-            raise FormationError(f"dt must be a positive finite sampling period in seconds, got {dt}")
+        if not isinstance(part, Partition):
+            raise TypeError(f"part must be a Partition, got {type(part).__name__}")
+        check_dynamics(dynamics)
+        dt = check_dt(dt)
         self.part = part
         self.dynamics = dynamics
         self.dt = float(dt)
@@ -455,6 +458,24 @@ def _solve_ff(part: Partition, rhs: Array) -> Array:
     return np.moveaxis(sol, 0, -2)
 
 
+def _check_law_params(params: dict[str, Any], dynamics: LinearDynamics) -> dict[str, Any]:
+    """Validate law parameters whatever the law does with them (gain is refused even where K overrides it)."""
+    out = dict(params)
+    if "gain" in out:
+        out["gain"] = check_real_scalar(out["gain"], "gain", low=0.0, unit="1/s", what="positive and finite (1/s)")
+    if "eps" in out and out["eps"] is not None:
+        out["eps"] = check_real_scalar(out["eps"], "eps", low=0.0, what="a positive finite number")
+    if "rounds" in out and out["rounds"] is not None:
+        out["rounds"] = check_int(
+            out["rounds"], "rounds", low=1, what="a positive integer number of communication rounds"
+        )
+    if "K" in out and out["K"] is not None:
+        out["K"] = as_array(out["K"], "K", shape=(dynamics.p, dynamics.q))
+    if "Q" in out and out["Q"] is not None:
+        out["Q"] = as_array(out["Q"], "Q", shape=(dynamics.q, dynamics.q))
+    return out
+
+
 def make_law(
     law: str,
     part: Partition,
@@ -468,6 +489,12 @@ def make_law(
     ``linear_paper``: eps, K, Q; ``dynamic``: K, gain, Q; ``dynamic_distributed``:
     rounds (default 1), K, gain, Q. Unknown parameters are refused.
     """
+    if not isinstance(law, str):
+        raise TypeError(f"law must be a law name (str), one of {', '.join(LAWS)}; got {type(law).__name__}")
+    if not isinstance(part, Partition):
+        raise TypeError(f"part must be a Partition, got {type(part).__name__}")
+    check_dynamics(dynamics)
+    dt = check_dt(dt)
     allowed = {
         "stationary": {"gain"},
         "linear": {"eps", "K", "Q"},
@@ -480,6 +507,7 @@ def make_law(
     extra = set(params) - allowed[law]
     if extra:
         raise TypeError(f"law {law!r} got unexpected parameter(s): {', '.join(sorted(extra))}")
+    params = _check_law_params(params, dynamics)
     if law == "stationary":
         if not dynamics.is_single_integrator:
             raise FormationError(

@@ -24,14 +24,24 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
-from .errors import ControlDimension, FrameworkError, StressMatrixError
+from .errors import ControlDimension, FormationError, FrameworkError, StressMatrixError
 from .framework import Framework, check_leaders_span
-from .validation import as_array, check_finite
+from .validation import (
+    as_array,
+    as_index_array,
+    check_bool,
+    check_framework,
+    check_int,
+    check_rtol,
+    check_square_matrix,
+    check_symmetric,
+)
 
 __all__ = [
     "DEFAULT_RTOL",
     "Partition",
     "StressLike",
+    "check_partition",
     "check_stress",
     "equilibrium_stress_basis",
     "follower_targets",
@@ -52,11 +62,8 @@ is_sparse_dense_threshold = 3000
 
 
 def _as_stress(omega: Any, name: str = "omega") -> StressLike:
-    if sp.issparse(omega):
-        mat = sp.csr_matrix(omega, dtype=np.float64)
-        check_finite(mat.data, name)
-        return mat
-    return as_array(omega, name, ndim=2)
+    """A real, finite, square dense array or CSR matrix (TypeError / ControlDimension / FormationError)."""
+    return check_square_matrix(omega, name)
 
 
 def stress_from_weights(
@@ -66,11 +73,21 @@ def stress_from_weights(
 
     Args:
         n: number of agents.
-        edges: (m, 2) undirected edges.
+        edges: (m, 2) undirected edges, integer indices in 0..n-1, no self-loops.
         weights: (m,) stress w_ij of each edge.
         sparse: return a ``scipy.sparse.csr_matrix`` instead of a dense array.
+
+    Raises:
+        TypeError: n not an integer, float edge indices, non-numeric weights.
+        FormationError: an edge index outside 0..n-1, a self-loop, non-finite weights.
+        ControlDimension: edges not (m, 2) or weights not (m,).
     """
-    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    n = check_int(n, "n", low=1)
+    e = as_index_array(edges, "edges", n=n, ndim=2)
+    loops = np.flatnonzero(e[:, 0] == e[:, 1])
+    if loops.size:
+        raise FormationError(f"edges must join two distinct agents, got the self-loop {tuple(e[loops[0]].tolist())}")
+    sparse = check_bool(sparse, "sparse")
     w = as_array(weights, "weights", ndim=1)
     if w.shape[0] != e.shape[0]:
         raise ControlDimension(f"weights must have one entry per edge ({e.shape[0]}), got {w.shape[0]}")
@@ -142,7 +159,11 @@ def check_stress(
     Raises:
         StressMatrixError: the failed property, with expected against actual.
         FrameworkError: the leaders do not affinely span R^d.
+        TypeError / FormationError: ``fw`` is not a Framework, ``rtol`` not in [0, 1).
     """
+    fw = check_framework(fw)
+    rtol = check_rtol(rtol)
+    check_graph = check_bool(check_graph, "check_graph")
     omega = _as_stress(omega)
     n = fw.n
     if omega.shape != (n, n):
@@ -264,7 +285,9 @@ def project_stress(omega: ArrayLike, fw: Framework, rtol: float = DEFAULT_RTOL) 
     checked with :func:`check_stress` (rounding can in principle break PSD).
     Used for the paper's matrix, which is printed rounded to 3 decimals.
     """
-    om = as_array(omega, "omega", ndim=2)
+    fw = check_framework(fw)
+    rtol = check_rtol(rtol)
+    om = as_array(omega.toarray() if sp.issparse(omega) else omega, "omega", ndim=2)
     if om.shape != (fw.n, fw.n):
         raise StressMatrixError(f"omega must have shape ({fw.n}, {fw.n}), got {om.shape}")
     basis = equilibrium_stress_basis(fw)
@@ -292,11 +315,12 @@ class Partition:
     def __init__(self, omega: Any, leaders: Sequence[int]) -> None:
         om = _as_stress(omega)
         n = om.shape[0]
-        if om.ndim != 2 or om.shape[1] != n:
-            raise ControlDimension(f"omega must be square, got shape {om.shape}")
-        lead = np.asarray(list(leaders), dtype=np.int64)
-        if lead.size == 0 or np.any((lead < 0) | (lead >= n)) or np.unique(lead).size != lead.size:
-            raise FrameworkError(f"leaders {lead.tolist()} must be distinct indices in 0..{n - 1}")
+        try:
+            lead = as_index_array(leaders, "leaders", n=n, min_size=1, distinct=True)
+        except FormationError as exc:  # keep the historical class for range / duplicate errors
+            raise FrameworkError(f"leaders must be distinct indices in 0..{n - 1}: {exc}") from exc
+        if lead.size >= n:
+            raise FrameworkError(f"leaders must leave at least one follower: {lead.size} leaders of {n} agents")
         mask = np.ones(n, dtype=bool)
         mask[lead] = False
         self.n = n
@@ -387,17 +411,76 @@ class Partition:
         return ff + np.einsum("fl,...lq->...fq", self.omega_fl, xl)
 
 
-def follower_targets(omega: Any, leaders: Sequence[int], x_leaders: ArrayLike) -> NDArray[np.float64]:
+def check_partition(part: Partition, rtol: float = DEFAULT_RTOL, name: str = "omega") -> None:
+    """Check the stress properties the laws rely on, without the nominal positions.
+
+    ``omega`` must be nonzero and symmetric (max |Omega - Omega^T| <= rtol max |Omega_ij|),
+    its rows must sum to zero (tolerance rtol max |Omega_ij| sqrt(n): targets are then
+    translation-equivariant), and Omega_ff must be positive definite (smallest eigenvalue
+    > rtol times the largest; sparse: an LDL^T inertia count), so that the affine
+    localisation x_f* = -Omega_ff^-1 Omega_fl x_l exists and the laws' modes are real.
+    Omega r = 0 needs the positions: see :func:`check_stress`.
+
+    Raises:
+        StressMatrixError: the failed property, naming ``name`` with expected against actual.
+    """
+    rtol = check_rtol(rtol)
+    om = part.omega
+    scale = _scale(om)
+    if scale == 0.0:
+        raise StressMatrixError(f"{name} is the zero matrix: a stress matrix must have rank n - d - 1 > 0")
+    try:
+        check_symmetric(om, name, rtol)
+    except FormationError as exc:
+        raise StressMatrixError(str(exc)) from exc
+    rowsum = np.asarray(om.sum(axis=1)).ravel()
+    worst = int(np.argmax(np.abs(rowsum)))
+    tol = rtol * scale * np.sqrt(part.n)
+    if abs(rowsum[worst]) > tol:
+        raise StressMatrixError(
+            f"{name} rows must sum to zero (a stress matrix): row {worst} sums to {rowsum[worst]:.3g} "
+            f"(tolerance {tol:.3g})"
+        )
+    if part.sparse and part.n_f > 2000:
+        try:
+            neg, zero, _ = _ldl_inertia(part.omega_ff, max(rtol, 1e-14))
+        except RuntimeError as exc:
+            raise StressMatrixError(f"{name}: Omega_ff is not positive definite ({exc})") from exc
+        if neg or zero:
+            raise StressMatrixError(
+                f"{name}: Omega_ff must be positive definite, got {neg} negative and {zero} zero pivot(s) in its "
+                "LDL^T factorisation (the followers are not affinely localisable from these leaders)"
+            )
+        return
+    eff = np.linalg.eigvalsh(part.omega_ff_dense)
+    if not eff[0] > rtol * max(abs(eff[-1]), abs(eff[0])):
+        raise StressMatrixError(
+            f"{name}: Omega_ff must be positive definite, got smallest eigenvalue {eff[0]:.3g} (largest "
+            f"{eff[-1]:.3g}): the followers are not affinely localisable from these leaders"
+        )
+
+
+def follower_targets(
+    omega: Any, leaders: Sequence[int], x_leaders: ArrayLike, *, check: bool = True, rtol: float = DEFAULT_RTOL
+) -> NDArray[np.float64]:
     """Follower targets x_f* = -Omega_ff^-1 Omega_fl x_l (Lemma 2).
 
     Args:
         omega: stress matrix, shape (n, n), dense or sparse.
         leaders: leader indices (n_l of them); followers are the others, in increasing order.
         x_leaders: leader positions, shape (n_l, d) or batched (..., n_l, d).
+        check: validate omega with :func:`check_partition` (symmetric, zero row sums,
+            Omega_ff positive definite) at ``rtol``; ``check=False`` skips it for speed.
+        rtol: relative tolerance of the check.
     Returns:
-        Follower targets, shape (n_f, d) (or (..., n_f, d)).
+        Follower targets, shape (n_f, d) (or (..., n_f, d)), m.
+
+    Raises:
+        StressMatrixError: omega fails the check.
     """
     part = Partition(omega, leaders)
+    if check_bool(check, "check"):
+        check_partition(part, rtol)
     xl = as_array(x_leaders, "x_leaders")
     if xl.ndim < 2 or xl.shape[-2] != part.n_l:
         raise ControlDimension(f"x_leaders must have shape (..., {part.n_l}, d), got {xl.shape}")

@@ -16,9 +16,13 @@ from numpy.typing import NDArray
 from .dynamics import LinearDynamics
 from .errors import FormationError, UnstableParameterError
 from .laws import DynamicLeaderLaw, FollowerLaw, StressFeedbackLaw, make_law
-from .stress import Partition
+from .stress import DEFAULT_RTOL, Partition, check_partition
+from .validation import check_bool, check_dt, check_dynamics, check_real_scalar, check_rtol
 
-__all__ = ["StabilityReport", "dt_interval", "extreme_eigenvalues", "stability_report"]
+__all__ = ["DT_SEARCH", "StabilityReport", "dt_interval", "extreme_eigenvalues", "stability_report", "stable_windows"]
+
+#: Default range of sampling periods T (s) scanned for stable windows by :func:`stability_report`.
+DT_SEARCH: tuple[float, float] = (1e-3, 100.0)
 
 
 @dataclass(frozen=True)
@@ -39,6 +43,14 @@ class StabilityReport:
         steps_to_1e6: predicted steps for the error to fall by 10^6 (inf if unstable).
         K: the feedback gain used, shape (p, q).
         notes: remarks on where the paper's statement differs from the computed answer.
+        windows: every open interval of T (s) inside ``dt_search`` on which the law is stable,
+            increasing (empty: never stable there; None: not computed, e.g. ``linear``, whose eps
+            adapts to T).
+        dt_opt: the fastest T (s): 2 / (g (lambda_min + lambda_max)) for ``stationary``, the
+            numerical minimiser of rho over ``windows`` otherwise (None if there is none).
+        rho_opt: the spectral radius at ``dt_opt``.
+        dt_search: the range (s) scanned for ``windows``.
+        jacobi_radius: ``dynamic_distributed`` only: spectral radius of J = -D^-1 N_ff.
     """
 
     law: str
@@ -56,6 +68,11 @@ class StabilityReport:
     K: NDArray[np.float64] | None = None
     rounds: int | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
+    windows: list[tuple[float, float]] | None = None
+    dt_opt: float | None = None
+    rho_opt: float | None = None
+    dt_search: tuple[float, float] | None = None
+    jacobi_radius: float | None = None
 
     @property
     def dt_max(self) -> float | None:
@@ -70,6 +87,8 @@ class StabilityReport:
                 v = v.tolist()
             elif isinstance(v, tuple):
                 v = list(v)
+            elif isinstance(v, list):
+                v = [list(w) for w in v]
             elif isinstance(v, float) and not math.isfinite(v):
                 v = str(v)
             out[k] = v
@@ -84,6 +103,11 @@ class StabilityReport:
         ]
         if self.dt_range is not None:
             lines.append(f"  stable for T in ({self.dt_range[0]:.6g}, {self.dt_range[1]:.6g}) s")
+        if self.windows is not None and self.dt_search is not None:
+            ws = ", ".join(f"({a:.6g}, {b:.6g})" for a, b in self.windows) or "none"
+            lines.append(f"  stable windows of T in [{self.dt_search[0]:g}, {self.dt_search[1]:g}] s: {ws}")
+        if self.dt_opt is not None:
+            lines.append(f"  fastest T = {self.dt_opt:.6g} s (spectral radius {self.rho_opt:.6g})")
         if self.eps_range is not None:
             lines.append(
                 f"  eps = {self.eps:.6g}, stable for eps in ({self.eps_range[0]:.6g}, {self.eps_range[1]:.6g})"
@@ -96,6 +120,8 @@ class StabilityReport:
 
 def extreme_eigenvalues(part: Partition) -> tuple[float, float]:
     """Smallest and largest eigenvalue of Omega_ff (sparse: Lanczos, shift-invert at 0 for the smallest)."""
+    if not isinstance(part, Partition):
+        raise TypeError(f"part must be a Partition, got {type(part).__name__}")
     if not part.sparse or part.n_f <= 2000:
         lam = np.linalg.eigvalsh(part.omega_ff_dense)
         return float(lam[0]), float(lam[-1])
@@ -145,12 +171,69 @@ def dt_interval(law_at: Any, dt: float, dt_search_max: float = 100.0) -> tuple[f
     return lo, hi
 
 
+def stable_windows(
+    rho: Any, t_lo: float, t_hi: float, points: int = 240, refine: int = 40
+) -> tuple[list[tuple[float, float]], float | None, float | None]:
+    """Every open interval of T in [t_lo, t_hi] on which ``rho(T) < 1``, and the minimiser of rho.
+
+    Scans ``points`` log-spaced periods, bisects each change of stability (``refine``
+    halvings), and minimises rho with a bounded scalar search around the best grid point.
+    Windows narrower than the grid spacing can be missed; a window touching an end of the
+    range is reported up to that end.
+
+    Args:
+        rho: T (s) -> spectral radius.
+        t_lo, t_hi: the range scanned (s), 0 < t_lo < t_hi.
+    Returns:
+        (windows, T_opt, rho(T_opt)); T_opt None when there is no window.
+    """
+    from scipy.optimize import minimize_scalar
+
+    grid = np.geomspace(t_lo, t_hi, points)
+    vals = np.array([rho(float(t)) for t in grid])
+    ok = vals < 1.0
+
+    def edge(good: float, bad: float) -> float:
+        for _ in range(refine):
+            mid = math.sqrt(good * bad)
+            if rho(mid) < 1.0:
+                good = mid
+            else:
+                bad = mid
+        return math.sqrt(good * bad)
+
+    windows: list[tuple[float, float]] = []
+    i = 0
+    while i < points:
+        if not ok[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < points and ok[j + 1]:
+            j += 1
+        lo = float(grid[0]) if i == 0 else edge(float(grid[i]), float(grid[i - 1]))
+        hi = float(grid[-1]) if j == points - 1 else edge(float(grid[j]), float(grid[j + 1]))
+        windows.append((lo, hi))
+        i = j + 1
+    if not windows:
+        return windows, None, None
+    k = int(np.argmin(vals))
+    a, b = float(grid[max(k - 1, 0)]), float(grid[min(k + 1, points - 1)])
+    res = minimize_scalar(lambda lt: rho(math.exp(lt)), bounds=(math.log(a), math.log(b)), method="bounded")
+    t_opt, r_opt = (math.exp(res.x), float(res.fun)) if res.fun <= vals[k] else (float(grid[k]), float(vals[k]))
+    return windows, t_opt, r_opt
+
+
 def stability_report(
     omega: Any,
     leaders: Sequence[int],
     dt: float = 1.0,
     law: str = "stationary",
     dynamics: LinearDynamics | None = None,
+    *,
+    check: bool = True,
+    rtol: float = DEFAULT_RTOL,
+    dt_search: tuple[float, float] | None = None,
     **params: Any,
 ) -> StabilityReport:
     """Closed-loop stability of ``law`` on stress ``omega`` at sampling period ``dt`` (s).
@@ -161,6 +244,11 @@ def stability_report(
         dt: sampling period T (s).
         law: one of ``stationary``, ``linear``, ``linear_paper``, ``dynamic``, ``dynamic_distributed``.
         dynamics: agent dynamics; default single integrators in 2D (the spectrum does not depend on d).
+        check: validate omega first (:func:`~formation_env.core.stress.check_partition`:
+            symmetric, zero row sums, Omega_ff positive definite, at ``rtol``); ``check=False``
+            skips it for speed (an asymmetric omega then gives a meaningless report).
+        rtol: relative tolerance of that check.
+        dt_search: range (s) of T scanned for every stable window (default :data:`DT_SEARCH`).
         **params: law parameters (gain, eps, K, Q, rounds), see :func:`make_law`.
 
     Returns:
@@ -170,7 +258,21 @@ def stability_report(
         ranges are found numerically from their mode matrices.
     """
     part = Partition(omega, leaders)
-    dyn = dynamics if dynamics is not None else LinearDynamics.single_integrator(2)
+    rtol = check_rtol(rtol)
+    if check_bool(check, "check"):
+        check_partition(part, rtol)
+    dt = check_dt(dt)
+    dyn = check_dynamics(dynamics) if dynamics is not None else LinearDynamics.single_integrator(2)
+    if dt_search is None:
+        dt_search = DT_SEARCH
+    try:
+        t_lo, t_hi = dt_search
+    except (TypeError, ValueError) as exc:
+        raise TypeError(f"dt_search must be a pair (T_lo, T_hi) of periods in seconds, got {dt_search!r}") from exc
+    t_lo = check_dt(t_lo, "dt_search[0]")
+    t_hi = check_dt(t_hi, "dt_search[1]")
+    if not t_lo < t_hi:
+        raise FormationError(f"dt_search must be increasing (T_lo < T_hi), got ({t_lo:g}, {t_hi:g})")
     lam_min, lam_max = extreme_eigenvalues(part)
     if lam_min <= 0:
         raise FormationError(f"Omega_ff is not positive definite (smallest eigenvalue {lam_min:.3g})")
@@ -180,9 +282,14 @@ def stability_report(
     dt_range: tuple[float, float] | None = None
     eps = eps_range = None
     K = getattr(the_law, "K", None)
+    windows: list[tuple[float, float]] | None = None
+    dt_opt = rho_opt = jac = None
     if law == "stationary":
         gain = float(params.get("gain", 1.0))
         dt_range = (0.0, 2.0 / (gain * lam_max))
+        dt_opt = 2.0 / (gain * (lam_min + lam_max))
+        rho_opt = (lam_max - lam_min) / (lam_max + lam_min)
+        windows = [(t_lo, min(t_hi, dt_range[1]))] if t_lo < dt_range[1] else []
         notes.append(
             f"Theorem 1: stable iff T g mu_min > -2, i.e. T < {dt_range[1]:.6g} s; the best T is "
             f"2 / (lambda_min + lambda_max) = {2.0 / (gain * (lam_min + lam_max)):.6g} s "
@@ -198,17 +305,42 @@ def stability_report(
             )
     elif isinstance(the_law, DynamicLeaderLaw):
         base = dict(params)
-        dt_range = dt_interval(lambda t: make_law(law, part, dyn, t, **base), dt)
+        rho_of = _dynamic_rho(the_law, dyn, params)
+        dt_range = dt_interval(lambda t: _Rho(rho_of(t)), dt)
+        windows, dt_opt, rho_opt = stable_windows(rho_of, t_lo, t_hi)
+        if windows and dt_range == (0.0, 0.0):
+            near = min(windows, key=lambda w: abs(math.log(math.sqrt(w[0] * w[1]) / dt)))
+            dt_range = near
         if law == "dynamic" and dyn.is_single_integrator and "K" not in params:
             g = float(params.get("gain", 1.0))
             notes.append(
                 f"Theorem 2: e(k+1) = (1 - g T) e(k); deadbeat at T = {1 / g:g} s, stable iff 0 < T < {2 / g:g} s"
             )
         if law == "dynamic_distributed":
+            jac = float(np.max(np.abs(the_law.jacobi_eigenvalues())))
             notes.append(
                 f"{the_law.rounds} Jacobi round(s) per sample, warm-started from the previous input; not in the paper. "
-                f"Jacobi spectral radius {np.max(np.abs(the_law.jacobi_eigenvalues())):.4g}"
+                f"Jacobi spectral radius rho(J) = {jac:.4g} (J = -D^-1 N_ff); the law can be stable for some T "
+                "only if rho(J) < 1"
             )
+            if jac >= 1.0:
+                notes.append(
+                    f"rho(J) = {jac:.4g} >= 1: no T and no number of rounds m stabilises dynamic_distributed on this "
+                    "stress (a Jacobi mode never decays); use law='dynamic' (centralised solve) or 'stationary'"
+                )
+            elif not windows:
+                m_ok = _rounds_that_work(law, part, dyn, base, t_lo, t_hi, the_law.rounds)
+                notes.append(
+                    f"never stable with m = {the_law.rounds} round(s) for T in [{t_lo:g}, {t_hi:g}] s; "
+                    + (f"m = {m_ok} rounds gives stable windows" if m_ok else "no m up to 64 helps either")
+                )
+    if windows is not None and not windows and law != "dynamic_distributed":
+        notes.append(f"never stable for T in [{t_lo:g}, {t_hi:g}] s")
+    if law in ("linear", "linear_paper") and not dyn.is_single_integrator:
+        notes.append(
+            "the linear law tracks the affine targets only while the leaders move on free trajectories "
+            "x_l(k+1) = A_d x_l(k) (u_l = 0); leaders held still or steered leave a tracking error (use 'dynamic')"
+        )
     stable = rho < 1.0
     decay = -math.log(rho) / dt if 0 < rho < 1 else (math.inf if rho == 0 else 0.0)
     steps = (math.log(1e-6) / math.log(rho) if 0 < rho < 1 else 1.0) if stable else math.inf
@@ -228,7 +360,64 @@ def stability_report(
         K=None if K is None else np.asarray(K),
         rounds=getattr(the_law, "rounds", None),
         notes=tuple(notes),
+        windows=windows,
+        dt_opt=dt_opt,
+        rho_opt=rho_opt,
+        dt_search=(t_lo, t_hi),
+        jacobi_radius=jac,
     )
+
+
+class _Rho:
+    """A stand-in law for :func:`dt_interval`: only ``spectral_radius``."""
+
+    def __init__(self, rho: float) -> None:
+        self._rho = rho
+
+    def spectral_radius(self) -> float:
+        return self._rho
+
+
+def _dynamic_rho(the_law: DynamicLeaderLaw, dyn: LinearDynamics, params: dict[str, Any]) -> Any:
+    """T -> closed-loop spectral radius of a dynamic-leader law, reusing its T-independent parts
+    (the Jacobi eigenvalues nu^m; a given K) instead of rebuilding the law at every T."""
+    from .dynamics import c2d_zoh, riccati_gain
+    from .laws import jacobi_modes, spectral_radius
+
+    c = None if the_law.rounds is None else the_law.jacobi_eigenvalues() ** the_law.rounds
+    fixed_k = params.get("K")
+    gain = float(params.get("gain", 1.0))
+
+    def rho(t: float) -> float:
+        a_d, b_d = (dyn.A, dyn.B) if dyn.discrete else c2d_zoh(dyn.A, dyn.B, t)
+        if fixed_k is not None:
+            k = np.asarray(fixed_k, dtype=np.float64)
+        elif dyn.is_single_integrator:
+            k = -gain * np.eye(dyn.q)
+        else:
+            try:
+                k = riccati_gain(a_d, b_d, params.get("Q"))
+            except FormationError:
+                return math.inf
+        if c is None:
+            return float(np.max(np.abs(np.linalg.eigvals(a_d + b_d @ k))))
+        return spectral_radius(jacobi_modes(a_d, b_d, k, c))
+
+    return rho
+
+
+def _rounds_that_work(
+    law: str, part: Partition, dyn: LinearDynamics, base: dict[str, Any], t_lo: float, t_hi: float, m0: int | None
+) -> int | None:
+    """The smallest m in 2, 4, .., 64 (above ``m0``) with a stable window on a coarse grid, or None."""
+    grid = np.geomspace(t_lo, t_hi, 80)
+    for m in (2, 4, 8, 16, 32, 64):
+        if m0 is not None and m <= m0:
+            continue
+        kw = dict(base, rounds=m)
+        if any(make_law(law, part, dyn, float(t), **kw).spectral_radius() < 1.0 for t in grid):
+            return m
+    return None
 
 
 def require_stable(the_law: FollowerLaw) -> None:

@@ -448,14 +448,14 @@ def check_partition(part: Partition, rtol: float = DEFAULT_RTOL, name: str = "om
             raise StressMatrixError(f"{name}: Omega_ff is not positive definite ({exc})") from exc
         if neg or zero:
             raise StressMatrixError(
-                f"{name}: Omega_ff must be positive definite, got {neg} negative and {zero} zero pivot(s) in its "
+                f"{name}: Omega_ff is not positive definite (it must be): {neg} negative and {zero} zero pivot(s) in its "
                 "LDL^T factorisation (the followers are not affinely localisable from these leaders)"
             )
         return
     eff = np.linalg.eigvalsh(part.omega_ff_dense)
     if not eff[0] > rtol * max(abs(eff[-1]), abs(eff[0])):
         raise StressMatrixError(
-            f"{name}: Omega_ff must be positive definite, got smallest eigenvalue {eff[0]:.3g} (largest "
+            f"{name}: Omega_ff is not positive definite (it must be), smallest eigenvalue {eff[0]:.3g} (largest "
             f"{eff[-1]:.3g}): the followers are not affinely localisable from these leaders"
         )
 

@@ -11,6 +11,8 @@ __all__ = [
     "ControlDimension",
     "FormationError",
     "FrameworkError",
+    "LawAssumptionWarning",
+    "ReachabilityWarning",
     "StabilityWarning",
     "StressMatrixError",
     "UnstableParameterError",
@@ -39,3 +41,11 @@ class UnstableParameterError(FormationError):
 
 class StabilityWarning(UserWarning):
     """A legal but doubtful setting, e.g. a sampling period beyond the stability bound."""
+
+
+class ReachabilityWarning(StabilityWarning):
+    """A leader path that no input of the dynamics can follow exactly (the message gives the residual)."""
+
+
+class LawAssumptionWarning(StabilityWarning):
+    """A law used outside the assumption its tracking guarantee needs (e.g. ``linear`` with steered leaders)."""

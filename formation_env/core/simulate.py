@@ -12,10 +12,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from .analysis import require_stable
 from .dynamics import LinearDynamics
-from .errors import ControlDimension, FormationError, StabilityWarning
+from .errors import ControlDimension, LawAssumptionWarning, ReachabilityWarning, StabilityWarning
 from .laws import FollowerLaw, make_law
-from .stress import Partition
-from .validation import as_array
+from .stress import DEFAULT_RTOL, Partition, check_partition
+from .validation import as_array, check_bool, check_dt, check_dynamics, check_int, check_rtol
 
 __all__ = ["SimResult", "simulate"]
 
@@ -50,13 +50,44 @@ class SimResult:
         return np.arange(self.positions.shape[0], dtype=np.float64) * self.dt
 
 
-def _leader_states(value: ArrayLike, n_l: int, dyn: LinearDynamics, k: int) -> Array:
-    v = as_array(value, f"leader_path({k})", ndim=2)
-    if v.shape == (n_l, dyn.q):
-        return v
-    if v.shape == (n_l, dyn.d):
-        return dyn.state_from_position(v)
-    raise ControlDimension(f"leader_path({k}) must return shape ({n_l}, {dyn.d}) or ({n_l}, {dyn.q}), got {v.shape}")
+class _PathStates:
+    """Leader states from a leader path through the dynamics' output matrix C (any state order).
+
+    Positions p (n_l, d) become x = C^+ p + N z, N a basis of null(C), with z the
+    least-squares fit of the position rate C A x (continuous A) to the forward difference
+    (p(k) - p(k-1)) / T (zero at k = 0: at rest). For [p, v] double integrators this is the
+    forward-difference velocity; for single integrators x = p. Full states (n_l, q) are used
+    as given.
+    """
+
+    def __init__(self, dyn: LinearDynamics, n_l: int, dt: float) -> None:
+        self.dyn, self.n_l, self.dt = dyn, n_l, dt
+        c = dyn.C
+        self.c_pinv = np.linalg.pinv(c)  # (q, d)
+        u, s, vt = np.linalg.svd(c)
+        rank = int(np.sum(s > 1e-12 * max(s[0], 1.0)))
+        self.null = vt[rank:].T  # (q, q - rank)
+        ca = c @ dyn.A
+        self.ca = ca
+        self.fit = None if self.null.shape[1] == 0 else np.linalg.pinv(ca @ self.null)  # (q - r, d)
+
+    def __call__(self, value: ArrayLike, k: int, prev_pos: Array | None) -> tuple[Array, bool]:
+        """(states (n_l, q), True if the path gave positions)."""
+        dyn, n_l = self.dyn, self.n_l
+        v = as_array(value, f"leader_path({k})", ndim=2)
+        if v.shape == (n_l, dyn.q) and dyn.q != dyn.d:
+            return v, False
+        if v.shape != (n_l, dyn.d):
+            raise ControlDimension(
+                f"leader_path({k}) must return shape ({n_l}, {dyn.d}) or ({n_l}, {dyn.q}) (leader positions or full "
+                f"states), got {v.shape}"
+            )
+        x = v @ self.c_pinv.T
+        if self.fit is not None:
+            rate = np.zeros_like(v) if prev_pos is None else (v - prev_pos) / self.dt
+            z = (rate - x @ self.ca.T) @ self.fit.T
+            x = x + z @ self.null.T
+        return x, True
 
 
 @overload
@@ -72,6 +103,8 @@ def simulate(
     *,
     require_stable_law: bool = ...,
     return_result: Literal[False] = ...,
+    check: bool = ...,
+    rtol: float = ...,
     **params: Any,
 ) -> Array: ...
 
@@ -89,6 +122,8 @@ def simulate(
     *,
     require_stable_law: bool = ...,
     return_result: Literal[True],
+    check: bool = ...,
+    rtol: float = ...,
     **params: Any,
 ) -> SimResult: ...
 
@@ -105,6 +140,8 @@ def simulate(
     *,
     require_stable_law: bool = False,
     return_result: bool = False,
+    check: bool = True,
+    rtol: float = DEFAULT_RTOL,
     **params: Any,
 ) -> Array | SimResult:
     """Simulate n agents under a follower law for ``steps`` samples of ``dt`` seconds.
@@ -117,15 +154,21 @@ def simulate(
         steps: number of samples.
         law: ``stationary`` | ``dynamic`` | ``dynamic_distributed`` | ``linear`` | ``linear_paper``.
         leader_path: None (leaders follow x_l(k+1) = A_d x_l: they stay for single
-            integrators), or k -> leader positions (n_l, d) or states (n_l, q) at
-            sample k. Leaders are placed on the path exactly; for positions with
-            higher-order dynamics the velocity is the forward difference. Their
-            input, fed forward to the dynamic laws, is the least-squares
-            B_d^+ (x_l(k+1) - A_d x_l(k)).
+            integrators), or k -> leader positions (n_l, d) or full states (n_l, q) at
+            sample k. Positions are mapped to states through the dynamics' output
+            matrix C, whatever the state order (x = C^+ p + N z, the unobserved part z
+            fitted so that the rate C A x matches the forward difference of the path;
+            at rest at k = 0). Leaders are placed on the path exactly; their input,
+            fed forward to the dynamic laws, is the least-squares
+            B_d^+ (x_l(k+1) - A_d x_l(k)). When that leaves a residual (no input
+            reaches the next state) a :class:`ReachabilityWarning` gives the largest.
         dynamics: agent dynamics; default single integrators in R^d.
         require_stable_law: raise ``UnstableParameterError`` instead of warning when the
             closed loop is not Schur.
         return_result: return a :class:`SimResult` instead of the positions.
+        check: validate omega (:func:`~formation_env.core.stress.check_partition`: symmetric,
+            zero row sums, Omega_ff positive definite) at ``rtol``; ``check=False`` skips it.
+        rtol: relative tolerance of that check.
         **params: law parameters (gain, eps, K, Q, rounds), see ``make_law``.
 
     Returns:
@@ -134,9 +177,23 @@ def simulate(
     Warns:
         StabilityWarning: the chosen dt (or eps) makes the closed loop unstable; the
             message gives the spectral radius.
+        ReachabilityWarning: the leader path is not reachable by the dynamics (residual given).
+        LawAssumptionWarning: ``linear`` with non-integrator dynamics (A != 0) while the leaders
+            are steered off their free trajectories (u_l != 0): it then keeps a tracking error.
     """
-    x = as_array(x0, "x0", ndim=2)
     part = Partition(omega, leaders)
+    rtol = check_rtol(rtol)
+    if check_bool(check, "check"):
+        check_partition(part, rtol)
+    x = as_array(x0, "x0", ndim=2)
+    dt = check_dt(dt)
+    steps = check_int(steps, "steps", low=0, what="a non-negative integer number of samples")
+    if dynamics is not None:
+        check_dynamics(dynamics)
+    if leader_path is not None and not callable(leader_path):
+        raise TypeError(f"leader_path must be None or a callable k -> leader positions, got {type(leader_path).__name__}")
+    require_stable_law = check_bool(require_stable_law, "require_stable_law")
+    return_result = check_bool(return_result, "return_result")
     n = part.n
     if x.shape[0] != n:
         raise ControlDimension(f"x0 must have one row per agent ({n}), got shape {x.shape}")
@@ -145,8 +202,6 @@ def simulate(
         x = dyn.state_from_position(x)
     if x.shape[1] != dyn.q:
         raise ControlDimension(f"x0 must have shape ({n}, {dyn.d}) or ({n}, {dyn.q}) for {dyn.name}, got {x.shape}")
-    if int(steps) != steps or steps < 0:
-        raise FormationError(f"steps must be a non-negative integer, got {steps}")
     the_law = make_law(law, part, dyn, dt, **params)
     if not the_law.tracks_targets:
         warnings.warn(
@@ -169,31 +224,56 @@ def simulate(
                 )
     a_d, b_d = the_law.A_d, the_law.B_d
     b_pinv = np.linalg.pinv(b_d)
+    unreach = np.eye(dyn.q) - b_d @ b_pinv  # projector onto what no input reaches
     n_l = part.n_l
-    steps = int(steps)
     states = np.empty((steps + 1, n, dyn.q))
     inputs = np.zeros((steps, n, dyn.p))
     states[0] = x
     memory = the_law.initial_memory()
-    nxt = _leader_states(leader_path(0), n_l, dyn, 0) if leader_path is not None else None
-    if nxt is not None:
-        states[0, part.leaders] = nxt
+    path = _PathStates(dyn, n_l, dt) if leader_path is not None else None
+    prev_pos = None
+    if path is not None:
+        xl0, is_pos = path(leader_path(0), 0, None)
+        states[0, part.leaders] = xl0
+        prev_pos = dyn.position(xl0)
+    worst_res, worst_k, scale, u_max = 0.0, -1, 1.0, 0.0
     for k in range(steps):
         xk = states[k]
-        if leader_path is None:
+        if path is None:
             u_l = np.zeros((n_l, dyn.p))
             xl_next = None
         else:
-            pos_next = leader_path(k + 1)
-            xl_next = _leader_states(pos_next, n_l, dyn, k + 1)
-            if dyn.q != dyn.d and np.shape(pos_next)[-1] == dyn.d:
-                xl_next = _finite_difference_state(dyn, xk[part.leaders], xl_next @ dyn.C.T, dt)
-            u_l = (xl_next - xk[part.leaders] @ a_d.T) @ b_pinv.T
+            xl_next, _ = path(leader_path(k + 1), k + 1, prev_pos)
+            prev_pos = dyn.position(xl_next)
+            step = xl_next - xk[part.leaders] @ a_d.T
+            u_l = step @ b_pinv.T
+            res = float(np.max(np.abs(step @ unreach.T))) if step.size else 0.0
+            scale = max(scale, float(np.max(np.abs(xl_next))))
+            if res > worst_res:
+                worst_res, worst_k = res, k
+            u_max = max(u_max, float(np.max(np.abs(u_l))))
         states[k + 1], memory = the_law.step(xk, u_l, memory)
         if xl_next is not None:
             states[k + 1, part.leaders] = xl_next
         inputs[k, part.leaders] = u_l
         inputs[k, part.followers] = (states[k + 1, part.followers] - xk[part.followers] @ a_d.T) @ b_pinv.T
+    if worst_res > 1e-9 * scale:
+        warnings.warn(
+            f"leader_path is not reachable by the {dyn.name} dynamics: no input moves the leaders from x_l(k) to "
+            f"x_l(k+1); largest residual |(I - B_d B_d^+)(x_l(k+1) - A_d x_l(k))| = {worst_res:.3g} at k = "
+            f"{worst_k}. The leaders are put on the path anyway (a jump the followers' law does not see); pass full "
+            f"leader states ({n_l}, {dyn.q}) that obey x(k+1) = A_d x(k) + B_d u(k)",
+            ReachabilityWarning,
+            stacklevel=2,
+        )
+    if law == "linear" and np.any(dyn.A) and u_max > 1e-12 * scale:
+        warnings.warn(
+            f"law linear with {dyn.name} dynamics (A != 0): the leaders leave their free trajectories "
+            f"x_l(k+1) = A_d x_l(k) (largest leader input |u_l| = {u_max:.3g}), so the followers keep a tracking "
+            "error; the linear law tracks the affine targets only for u_l = 0; use law='dynamic'",
+            LawAssumptionWarning,
+            stacklevel=2,
+        )
     positions = dyn.position(states)
     if not return_result:
         return positions
@@ -209,12 +289,3 @@ def simulate(
         law=the_law,
         dt=float(dt),
     )
-
-
-def _finite_difference_state(dyn: LinearDynamics, cur: Array, pos_next: Array, dt: float) -> Array:
-    """Leader state at k+1 from its next position: position set, velocity = forward difference (double integrator)."""
-    out = dyn.state_from_position(pos_next)
-    d = dyn.d
-    if dyn.q == 2 * d:
-        out[:, d:] = (pos_next - dyn.position(cur)) / dt
-    return out

@@ -67,6 +67,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import ControlDimension, FrameworkError, StressMatrixError
 from .framework import Framework
+from .validation import check_framework, check_rtol
 from .stress import DEFAULT_RTOL, Partition, StressLike, check_stress, equilibrium_stress_basis, stress_from_weights
 
 __all__ = [
@@ -127,7 +128,8 @@ def design_stress(
         gives dense for the SDP methods and sparse for "constructive".
     cliques
         "constructive" only: the cliques, shape (n - d - 1, d + 2), the last agent of
-        each being the one it adds. None finds them in index order
+        each being the one it adds. None takes ``fw.cliques`` if the framework carries
+        them (``trilateration(..., n_leaders=k)``), else finds them in index order
         (:func:`trilateration_cliques`).
     verbose
         Print the solver's log.
@@ -148,6 +150,10 @@ def design_stress(
     ValueError
         Unknown method or solver, or an argument the method does not use.
     """
+    check_framework(fw)
+    if not isinstance(method, str):
+        raise TypeError(f"method must be a string, one of {[*METHODS, *_ALIASES]}; got {type(method).__name__}")
+    rtol = check_rtol(rtol)
     name = _ALIASES.get(method, method)
     if name not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {[*METHODS, *_ALIASES]}")
@@ -441,6 +447,8 @@ def clique_stress(positions: ArrayLike, cliques: ArrayLike, rtol: float = 1e-9) 
 
 
 def _constructive(fw: Framework, cliques: ArrayLike | None) -> sp.csr_matrix:
+    if cliques is None and fw.cliques is not None:
+        cliques = fw.cliques
     cl = trilateration_cliques(fw) if cliques is None else cliques
     omega = clique_stress(fw.positions, cl)
     lam_max = _extreme_eigenvalues(Partition(omega, fw.leaders).omega_ff, largest_only=True)[1]

@@ -13,20 +13,23 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
 from .errors import FrameworkError
 from .framework import Framework
+from .validation import as_array, check_int, check_seed
 
 __all__ = [
     "PAPER_OMEGA_PRINTED",
     "REGISTRY",
     "bipyramid",
     "cube_with_center",
+    "farthest_point_leaders",
     "get_framework",
     "helix",
     "hexagon",
@@ -87,8 +90,12 @@ def _edges_within(points: NDArray[np.float64], steps: NDArray[np.float64], tol: 
 
 
 def _check_count(value: int, minimum: int, what: str) -> None:
-    if int(value) != value or value < minimum:
-        raise FrameworkError(f"{what} must be an integer >= {minimum}, got {value!r}")
+    try:
+        check_int(value, what, low=minimum)
+    except TypeError:
+        raise
+    except ValueError as exc:
+        raise FrameworkError(f"{what} must be an integer >= {minimum}, got {value!r}") from exc
 
 
 def hexagon(radius: float = 1.0) -> Framework:
@@ -309,7 +316,87 @@ def _regular_simplex(d: int) -> NDArray[np.float64]:
     return v / np.linalg.norm(v[0])
 
 
-def trilateration(n: int = 100, d: int = 2, seed: int = 0) -> Framework:
+def farthest_point_leaders(positions: ArrayLike, count: int, fixed: Sequence[int] = ()) -> list[int]:
+    """Well-spread leaders by farthest-point sampling: ``count`` agents, starting with ``fixed``.
+
+    Each new leader is the agent farthest (Euclidean) from those chosen; O(n count).
+    Without ``fixed`` it starts from the agent farthest from the centroid.
+
+    Args:
+        positions: nominal positions, shape (n, d), m.
+        count: number of leaders, len(fixed) .. n (at least 1).
+        fixed: agents that must be leaders (e.g. the hull's vertices).
+    Returns:
+        ``count`` distinct agent indices, ``fixed`` first.
+    """
+    r = as_array(positions, "positions", ndim=2)
+    n = r.shape[0]
+    fixed_l = [int(i) for i in fixed]
+    count = check_int(count, "count", low=max(1, len(fixed_l)), high=n)
+    chosen = list(fixed_l)
+    if not chosen:
+        chosen = [int(np.argmax(np.linalg.norm(r - r.mean(axis=0), axis=1)))]
+    dist = np.min(np.linalg.norm(r[:, None, :] - r[chosen][None, :, :], axis=2), axis=1)
+    while len(chosen) < count:
+        i = int(np.argmax(dist))
+        chosen.append(i)
+        dist = np.minimum(dist, np.linalg.norm(r - r[i], axis=1))
+    return chosen
+
+
+def _hierarchical_cliques(
+    simplex: NDArray[np.float64], points: NDArray[np.float64], n_leaders: int
+) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
+    """Positions in agent order and cliques of the hierarchical trilateration (see :func:`trilateration`)."""
+    from scipy.spatial import Delaunay
+
+    d = simplex.shape[1]
+    extra = farthest_point_leaders(np.vstack([simplex, points]), n_leaders, fixed=range(d + 1))[d + 1 :]
+    extra_pts = [i - d - 1 for i in extra]
+    lead = np.vstack([simplex, points[extra_pts]])
+    cliques: list[NDArray[np.int64]] = []
+
+    def containing(tri_pts: NDArray[np.float64], new: NDArray[np.float64]) -> NDArray[np.int64]:
+        if d == 1:
+            order = np.argsort(tri_pts[:, 0])
+            pos = np.clip(np.searchsorted(tri_pts[order, 0], new[:, 0]), 1, tri_pts.shape[0] - 1)
+            return np.sort(np.c_[order[pos - 1], order[pos]], axis=1)
+        tri = Delaunay(tri_pts)
+        s = tri.find_simplex(new)
+        if np.any(s < 0):  # on the hull up to rounding: the nearest simplex by centroid
+            cent = tri_pts[tri.simplices].mean(axis=1)
+            s[s < 0] = cKDTree(cent).query(new[s < 0])[1]
+        return np.sort(tri.simplices[s], axis=1)
+
+    for j in range(d + 1, n_leaders):  # leaders' own cliques (they only enter Omega_ll)
+        cliques.append(np.r_[containing(lead[:j], lead[j : j + 1])[0], j])
+    rest = np.setdiff1d(np.arange(points.shape[0]), extra_pts)
+    placed = [lead]
+    nxt = n_leaders
+    target = n_leaders
+    lo, span = points.min(axis=0), np.ptp(points, axis=0) + 1e-12
+    while rest.size:
+        target *= 2**d
+        if target >= nxt + rest.size:
+            new, rest = rest, rest[:0]
+        else:  # one point per grid cell, nearest the cell's centre: a quasi-uniform level
+            h = (float(np.prod(span)) / (target - nxt)) ** (1.0 / d)
+            cell = np.floor((points[rest] - lo) / h).astype(np.int64)
+            key = np.ravel_multi_index(cell.T, tuple(cell.max(axis=0) + 1))
+            off = np.linalg.norm(points[rest] - ((cell + 0.5) * h + lo), axis=1)
+            order = np.lexsort((off, key))
+            first = np.r_[True, key[order][1:] != key[order][:-1]]
+            pick = np.zeros(rest.size, dtype=bool)
+            pick[order[first]] = True
+            new, rest = rest[pick], rest[~pick]
+        simplices = containing(np.vstack(placed), points[new])
+        cliques.append(np.c_[simplices, nxt + np.arange(new.size)])
+        placed.append(points[new])
+        nxt += new.size
+    return np.vstack(placed), np.vstack([np.atleast_2d(c) for c in cliques])
+
+
+def trilateration(n: int = 100, d: int = 2, seed: int = 0, n_leaders: int | None = None) -> Framework:
     """A random trilateration framework in R^d: each agent j > d joins d + 1 earlier, pairwise-joined agents.
 
     Agents 0..d (the leaders) are the vertices of a regular simplex of volume n
@@ -330,6 +417,19 @@ def trilateration(n: int = 100, d: int = 2, seed: int = 0) -> Framework:
     grow exponentially (1e7 at n = 30). Each level of the tree is one vectorised
     step: n = 10,000 in 2D builds in about 0.4 s.
 
+    With ``n_leaders=k`` the same points get a hierarchical, well-conditioned structure
+    instead: the k leaders are the simplex vertices plus k - d - 1 agents chosen by
+    farthest-point sampling (:func:`farthest_point_leaders`); the followers come in levels
+    of about k 2^d, k 4^d, ... agents (one per cell of a grid that halves each level), and
+    each follower joins the d + 1 vertices of the Delaunay simplex of the earlier levels
+    that contains it (its clique; the simplex's vertices are joined pairwise). Agents are
+    numbered leaders first (0..k-1), then level by level, and the cliques are stored on the
+    framework (``fw.cliques``) for ``design_stress(fw, "constructive")``. Every follower is
+    interpolated from a coarser level, the tree is only about log_(2^d)(n / k) deep, and
+    cond(Omega_ff) of the constructive stress stays in the hundreds (about 550 at
+    n = 10,000, k = 100 in 2D; see ``benchmarks/conditioning.py`` and docs/conditioning.md),
+    against 2e5 for the default. Degrees stay below about 50.
+
     Parameters
     ----------
     n
@@ -337,15 +437,32 @@ def trilateration(n: int = 100, d: int = 2, seed: int = 0) -> Framework:
     d
         Dimension, at least 1.
     seed
-        Seed of ``np.random.default_rng``.
+        Seed of ``np.random.default_rng``, a non-negative integer.
+    n_leaders
+        None (the random insertion order above, leaders 0..d), or the number of leaders k,
+        d + 1 <= k <= n - 1, for the hierarchical structure.
     """
     _check_count(d, 1, "d")
     _check_count(n, d + 2, "n")
+    seed = check_seed(seed)
+    if n_leaders is not None:
+        n_leaders = check_int(n_leaders, "n_leaders", low=d + 1, high=n - 1)
     rng = np.random.default_rng(seed)
     simplex = _regular_simplex(d)
     volume = abs(np.linalg.det(simplex[1:] - simplex[0])) / math.factorial(d)
     simplex *= (n / volume) ** (1.0 / d)
     points = rng.dirichlet(np.ones(d + 1), size=n - d - 1) @ simplex  # uniform in the simplex, random order
+    if n_leaders is not None:
+        r_h, cl_h = _hierarchical_cliques(simplex, points, n_leaders)
+        m = d + 2
+        pairs_h = np.vstack([cl_h[:, [a, b]] for a, b in itertools.combinations(range(m), 2)])
+        return Framework(
+            r_h,
+            np.unique(np.sort(pairs_h, axis=1), axis=0),
+            leaders=range(n_leaders),
+            name=f"trilateration_{d}d_{n}_k{n_leaders}_s{seed}",
+            cliques=cl_h,
+        )
     r = np.vstack([simplex, np.empty((n - d - 1, d))])
     cliques = []
     pid = np.arange(n - d - 1)  # points not yet inserted (rank = insertion priority) ...

@@ -108,13 +108,13 @@ def as_index_array(
         raise TypeError(f"{name} must be a sequence of integer agent indices, got None")
     if isinstance(x, str | bytes):
         raise TypeError(f"{name} must be a sequence of integer agent indices, got the string {x!r}")
-    if isinstance(x, numbers.Number) or np.ndim(x) == 0 and not isinstance(x, Iterable):
+    if isinstance(x, numbers.Number) or not isinstance(x, Iterable | np.ndarray):
         raise TypeError(f"{name} must be a sequence of integer agent indices, got {_describe(x)}")
     try:
         seq = list(x) if not isinstance(x, np.ndarray) else x
         raw = np.asarray(seq)
-    except (TypeError, ValueError) as exc:
-        raise TypeError(f"{name} must be a sequence of integer agent indices: {exc}") from exc
+    except (TypeError, ValueError) as exc:  # ragged lists
+        raise ControlDimension(f"{name} must be a regular array of integer agent indices (not ragged): {exc}") from exc
     if raw.size == 0:
         raw = raw.astype(np.int64).reshape((0,) if ndim == 1 else (0, 2))
     if raw.dtype == bool or raw.dtype.kind not in "iu":

@@ -11,9 +11,11 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	# torch pinned to the CPU build that lies on this machine's disk (unpinned pulls a multi-GB CUDA build)
+	# torch pinned to the CPU build that lies on this machine's disk (unpinned pulls a multi-GB CUDA build);
+	# installed first, it satisfies torch>=2.8 of the train, torchrl and bench extras as is
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	$(BIN)/python -m pip install --quiet -e ".[dev]"
+	# every extra (the base install is the maths core alone) and the dev tools
+	$(BIN)/python -m pip install --quiet -e ".[all,dev]"
 	touch $(STAMP)
 
 setup: $(STAMP)

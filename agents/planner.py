@@ -295,28 +295,35 @@ class CrossingPlanner:
 
     1. Shrink to Theta = ``scale`` I and stage the formation's disc (centre b + scale mean(r), radius rho =
        scale max|r_i - mean(r)| + agent radius) ``stage`` m before the first lane's strip, at the goal's y.
-    2. Go when the whole crossing is predicted clear: the discs' paths are known (they bounce off the box,
-       :func:`formation_env.env.obstacles.bounce`), and the team's centre is taken anywhere between
-       x_now + v (t - ``lag``)^+ and x_now + v t (cruise speed v = ``speed``) over the crossing; every disc
-       must stay ``margin`` m beyond rho plus its radius. Once the front has entered the strips, keep going.
+    2. Go when the whole crossing is predicted clear at some cruise speed v (``speed`` times 1, 0.8, 0.6 or
+       0.45; the fastest clear one): the discs' paths are known (they bounce off the box,
+       :func:`formation_env.env.obstacles.bounce`), and the team's centre is taken anywhere within ``slack`` m
+       of its predicted profile (from its speed now to v at ``accel`` u_max, then cruising); every disc must
+       stay ``margin`` m beyond rho plus its radius. Once the front has entered the strips, keep going (at the
+       slowest speed if none is predicted clear any more).
     3. Past the last strip, move the shrunk formation to the goal's b, then restore the goal pose.
 
     Attributes:
         scale: uniform scale of the formation while crossing.
-        speed: cruise speed (m/s) of the formation's centre while crossing.
+        speed: fastest cruise speed (m/s) of the formation's centre while crossing.
         margin: clearance (m) kept from each disc in the forecast.
-        lag: how far (s) the team's motion may trail the forecast (acceleration from rest, tracking lag).
+        accel: the acceleration of the forecast, a fraction of u_max (double integrators).
+        slack: how far (m) the team's centre may be from the forecast's profile (tracking lag, followers).
         stage: distance (m) of the staging point before the first strip.
+        shrink_step: largest distance (m) of any agent's shape target from its place in the fitted pose while
+            the formation shrinks (a gradual shrink keeps the followers from bunching up).
         lookahead: largest distance (m) of the centre target ahead of the fitted centre.
         kp: tracking gain of ``track_targets``.
 
     Tuned on training seeds 10_000..10_255 (``python -m agents.planner --tune moving_obstacles``).
     """
 
-    scale: float = 0.35
-    speed: float = 1.0
+    scale: float = 0.45
+    speed: float = 1.6
     margin: float = 0.25
-    lag: float = 1.0
+    accel: float = 0.7
+    slack: float = 0.4
+    shrink_step: float = 0.5
     stage: float = 0.3
     lookahead: float = 2.0
     kp: float = 4.0
@@ -338,17 +345,29 @@ class CrossingPlanner:
         x_lo = (discs[:, :, 0] - rad).min(axis=1) - self.margin - rho
         x_hi = (discs[:, :, 0] + rad).max(axis=1) + self.margin + rho
         y_path = par["goal_b"][:, 1] + self.scale * rc[1]
-        # forecast: is the crossing from here clear of every disc?
+        # forecast: which cruise speeds (fastest first) make the crossing from here clear of every disc? The
+        # centre accelerates from its speed now to v at ``accel`` u_max (at once for single integrators), then
+        # cruises; it is taken anywhere within ``slack`` m of that profile.
         t_now = state.k * engine.dt
-        t_cross = (x_hi - np.minimum(centre[:, 0], x_lo) + rho) / self.speed + self.lag
-        clear = np.ones(B, dtype=bool)
-        for tau in np.arange(0.0, float(t_cross.max()) + engine.dt, engine.dt):
-            c = bounce(discs[:, :, :2], discs[:, :, 2:4], rad, t_now + tau, engine.bounds)  # (B, M, 2)
-            x_far = centre[:, 0] + self.speed * tau
-            x_near = centre[:, 0] + self.speed * max(tau - self.lag, 0.0)
-            px = np.clip(c[:, :, 0], x_near[:, None], x_far[:, None])  # nearest point of the team's band
-            gap = np.hypot(c[:, :, 0] - px, c[:, :, 1] - y_path[:, None]) - rad - rho - self.margin
-            clear &= (gap > 0.0).all(axis=1) | (tau > t_cross)
+        v0 = state.vel[:, :, 0].mean(axis=1)
+        acc = np.inf if engine.kind == "single_integrator" else self.accel * engine.u_max
+        speeds = self.speed * np.array([1.0, 0.8, 0.6, 0.45])
+        speed = np.zeros(B)  # 0: no speed is clear
+        for v in speeds[::-1]:  # the fastest clear speed wins
+            t_a = np.abs(v - v0) / acc
+            sgn = np.sign(v - v0)
+            t_cross = (x_hi - np.minimum(centre[:, 0], x_lo) + rho + self.slack) / v + t_a
+            clear = np.ones(B, dtype=bool)
+            for tau in np.arange(0.0, float(t_cross.max()) + engine.dt, engine.dt):
+                c = bounce(discs[:, :, :2], discs[:, :, 2:4], rad, t_now + tau, engine.bounds)  # (B, M, 2)
+                ta = np.minimum(tau, t_a)
+                x_c = centre[:, 0] + v0 * ta + 0.5 * sgn * np.where(np.isfinite(acc), acc, 0.0) * ta**2 + v * (tau - ta)
+                px = np.clip(c[:, :, 0], (x_c - self.slack)[:, None], (x_c + self.slack)[:, None])
+                gap = np.hypot(c[:, :, 0] - px, c[:, :, 1] - y_path[:, None]) - rad - rho - self.margin
+                clear &= (gap > 0.0).all(axis=1) | (tau > t_cross)
+            speed = np.where(clear, v, speed)
+        clear = speed > 0.0
+        speed = np.where(clear, speed, self.speed * speeds[-1] / self.speed)  # inside with none clear: keep moving
         inside = centre[:, 0] + rho > x_lo
         passed = pos[:, :, 0].min(axis=1) > x_hi - rho + engine.agent_radius
         go = clear | inside
@@ -356,9 +375,12 @@ class CrossingPlanner:
         bx = np.where(go, b_fit[:, 0], np.minimum(bx_stage, np.maximum(b_fit[:, 0], bx_stage - 5.0)))
         b_cross = np.stack([bx, y_path - self.scale * rc[1]], -1)
         vel = np.zeros((B, 2))
-        vel[:, 0] = np.where(go & ~passed, self.speed, 0.0)
+        vel[:, 0] = np.where(go & ~passed, speed, 0.0)
         at_goal_x = b_fit[:, 0] > par["goal_b"][:, 0] - 0.3
+        th_fit = engine.affine.fit(pos)[0]
         small = self.scale * np.eye(2)[None].repeat(B, axis=0)
+        shape_gap = np.linalg.norm(affine_batch(r, small, b_fit) - affine_batch(r, th_fit, b_fit), axis=-1).max(axis=1)
+        small = _pose_between(th_fit, small, np.minimum(1.0, self.shrink_step / np.maximum(shape_gap, 1e-9)))
         th = np.where((passed & at_goal_x)[:, None, None], par["goal_theta"], small)
         b_goal = _toward(b_fit, par["goal_b"], self.lookahead)
         b = np.where(passed[:, None], b_goal, np.where(go[:, None], b_cross, _toward(b_fit, b_cross, self.lookahead)))

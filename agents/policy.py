@@ -87,7 +87,7 @@ def decode_state(engine: Engine, gs: NDArray[np.floating]) -> EngineState:
     th, b = engine.affine.fit(goal)  # static goals: the least-squares fit of the goal positions
     params: dict[str, Array] = {"goal_theta": th, "goal_b": b, **engine.scenario.decode_params(pv)}
     for ob, vec in zip(engine.obstacles, parts[7:-1], strict=True):
-        dec = ob.decode(vec, k * engine.dt, d)
+        dec = ob.decode(vec, engine.dt * k.astype(np.float64), d)
         if dec is not None:
             params[ob.key] = dec
     x = engine.dynamics.state_from_position(pos)

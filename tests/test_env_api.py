@@ -17,7 +17,8 @@ from pettingzoo.test import api_test, max_cycles_test, parallel_api_test, render
 
 from formation_env import formation_v0
 from formation_env.core.errors import FormationError
-from formation_env.env.engine import FOLLOWER_LAWS, offered_combinations
+from formation_env.env.engine import DYNAMICS, FOLLOWER_LAWS, offered_combinations
+from formation_env.env.scenarios import REGISTRY
 
 COMBOS = offered_combinations()
 IDS = [f"{s}-{d}-{law}" for s, d, law in COMBOS]
@@ -29,10 +30,11 @@ def _kwargs(combo: tuple[str, str, str]) -> dict[str, str]:
 
 
 def test_offered_combinations_cover_every_scenario_and_law():
-    assert {s for s, _, _ in COMBOS} == {"hold", "maneuver", "maneuver_3d", "narrow_passage", "obstacle_field"}
+    assert {s for s, _, _ in COMBOS} == set(REGISTRY)
     assert {law for _, _, law in COMBOS} == set(FOLLOWER_LAWS)
     assert all(d == "single_integrator" for _, d, law in COMBOS if law == "stationary")
-    assert len(COMBOS) == 5 * 7
+    per_scenario = len(DYNAMICS) * len(FOLLOWER_LAWS) - (len(DYNAMICS) - 1)  # stationary: single integrators
+    assert len(COMBOS) == len(REGISTRY) * per_scenario
 
 
 @pytest.mark.parametrize("combo", COMBOS, ids=IDS)
@@ -225,3 +227,25 @@ def test_step_after_end_and_before_reset():
         _, _, _, trunc, _ = env.step({a: np.zeros(2, np.float32) for a in env.agents})
     assert all(trunc.values()) and env.agents == []
     assert env.step({}) == ({}, {}, {}, {}, {})
+    with pytest.raises(FormationError, match="reset"):
+        env.step({"leader_0": np.zeros(2)})
+    fresh = formation_v0.parallel_env()
+    with pytest.raises(FormationError, match="reset"):
+        fresh.step({})
+
+
+def test_step_needs_exactly_the_live_agents():
+    env = formation_v0.parallel_env()
+    env.reset(seed=0)
+    acts = {a: np.zeros(2, np.float32) for a in env.agents}
+    with pytest.raises(ValueError, match="exactly the live agents"):
+        env.step({**acts, "leader_9": np.zeros(2)})
+
+
+def test_reset_infos_carry_every_step_key():
+    env = formation_v0.parallel_env(scenario="narrow_passage")
+    _, infos = env.reset(seed=0)
+    _, _, _, _, step_infos = env.step({a: np.zeros(2, np.float32) for a in env.agents})
+    for a in env.possible_agents:
+        assert set(infos[a]) == set(step_infos[a])
+        assert infos[a]["success"] is False and infos[a]["collision"] is False and infos[a]["time"] == 0.0

@@ -1,4 +1,4 @@
-"""The sparse (swarm) path of the engine: frameworks above ``engine.MAX_AGENTS`` agents."""
+"""Large swarms: frameworks above ``config.MAX_AGENTS`` agents keep a sparse stress and step the core law."""
 
 from __future__ import annotations
 
@@ -19,7 +19,7 @@ from formation_env import formation_v0
 from formation_env.core.errors import FormationError
 from formation_env.core.framework import Framework
 from formation_env.core.frameworks import trilateration
-from formation_env.env import engine as engine_mod
+from formation_env.env import config
 from formation_env.env.engine import Engine
 from formation_env.env.vector import FormationVecEnv
 
@@ -67,10 +67,10 @@ def test_sparse_path_matches_folded_path(
     fw = _scaled(40, 0.3, seed=1) if scenario in ("hold", "maneuver") else "paper"
     kw: dict[str, Any] = {"framework": fw, "agent_radius": 0.005, "max_cycles": 50}
     dense = Engine(scenario, dynamics, law, **kw)
-    monkeypatch.setattr(engine_mod, "MAX_AGENTS", 3)
+    monkeypatch.setattr(config, "MAX_AGENTS", 3)
     swarm = Engine(scenario, dynamics, law, **kw)
-    assert not dense.sparse and swarm.sparse and swarm._swarm is not None
-    assert sp.issparse(swarm.omega) and not hasattr(swarm, "_M")
+    assert not dense.sparse and swarm.sparse
+    assert sp.issparse(swarm.omega) and swarm._M is None and dense._M is not None
     assert swarm.law_params.keys() == dense.law_params.keys()
     assert swarm.spectral_radius == pytest.approx(dense.spectral_radius, rel=1e-9)
     a, b = _run(dense, 120), _run(swarm, 120)
@@ -155,7 +155,7 @@ def test_world_grows_for_hold_and_fixed_worlds_refuse_large_frameworks() -> None
     eng = Engine("hold", framework=fw, agent_radius=r)
     assert eng.bounds[1, 0] > np.abs(fw.positions).max() * 2
     for name in ("narrow_passage", "obstacle_field"):
-        with pytest.raises(FormationError, match=f"scenario '{name}' has fixed obstacles.*spans"):
+        with pytest.raises(FormationError, match=f"scenario '{name}' has obstacles.*spans"):
             Engine(name, framework=fw, agent_radius=r)
 
 
@@ -215,5 +215,5 @@ def test_sparse_stress_input_is_kept_sparse(monkeypatch: pytest.MonkeyPatch) -> 
         warnings.simplefilter("error")
         eng = Engine("hold", "single_integrator", "stationary", framework=fw, omega=om, agent_radius=_radius(fw))
     assert sp.issparse(eng.omega) and eng.spectral_radius < 1.0
-    monkeypatch.setattr(engine_mod, "MAX_AGENTS", 1000)  # a sparse omega for the folded path is densified
+    monkeypatch.setattr(config, "MAX_AGENTS", 1000)  # a sparse omega for the folded path is densified
     assert isinstance(Engine("hold", framework=fw, omega=om, agent_radius=_radius(fw)).omega, np.ndarray)

@@ -31,17 +31,17 @@ import argparse
 import json
 import math
 import sys
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from formation_env.env.engine import Engine, EngineState
-from agents.rollout import ActFn, reset_paired, run_batch
+from agents.rollout import reset_paired, run_batch
+from formation_env.env.engine import Engine
 
-__all__ = ["METRIC_KEYS", "evaluate", "mean_ci", "paired_difference", "run_batch", "wilson"]
+__all__ = ["METRIC_KEYS", "evaluate", "mean_ci", "paired_difference", "reset_paired", "run_batch", "wilson"]
 
 Array = NDArray[np.float64]
 
@@ -62,7 +62,6 @@ GAP_SUITES: dict[str, tuple[float, float]] = {
     "narrow_0.8-1.0": (0.8, 1.0),
     "wide_1.6-2.0": (1.6, 2.0),
 }
-
 
 
 def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:

@@ -67,7 +67,6 @@ EXACT_SPECTRUM_UP_TO = 2000
 INTERVAL_POINTS = 513
 
 
-
 # ---------------------------------------------------------------------------- configuration
 def resolve_dynamics(dynamics: str | LinearDynamics, d: int) -> LinearDynamics:
     """``"single_integrator"`` | ``"double_integrator"`` in R^d, or a ``LinearDynamics`` with position dim d."""
@@ -304,8 +303,6 @@ def make_swarm_law(
     if law_name in ("stationary", "linear"):
         return law, spectral_radius(stress_modes(law.A_d, law.B_d, law.K, law.eps, lam))  # type: ignore[attr-defined]
     return law, float(law.spectral_radius())
-
-
 
 
 def make_follower_law(

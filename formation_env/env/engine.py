@@ -38,7 +38,7 @@ from formation_env.core.framework import Framework
 from . import config
 from .config import DYNAMICS, FOLLOWER_LAWS, check_combination, offered_combinations, resolve_dynamics
 from .observations import DEFAULT_OBSERVATION, Observer
-from .obstacles import Capsules, clearance, path_clearance, ray_directions
+from .obstacles import Capsules, clearance, pair_clearance, path_clearance, ray_directions
 from .rewards import REWARD_TERMS, TERMS, total_reward
 from .scenarios import REGISTRY
 from .scenarios._base import Scenario, affine_batch
@@ -170,10 +170,14 @@ class Engine:
         self.reward_weights = self._weights(reward_weights)
 
         n, d, q, p = fw.n, fw.d, dyn.q, dyn.p
-        self.n, self.d, self.q, self.p = n, d, q, p
+        self.n: int = n
+        self.d: int = d
+        self.q: int = q
+        self.p: int = p
         self.leaders = np.asarray(fw.leaders, dtype=np.int64)
         self.followers = np.asarray(fw.followers, dtype=np.int64)
-        self.n_l, self.n_f = self.leaders.size, self.followers.size
+        self.n_l: int = int(self.leaders.size)
+        self.n_f: int = int(self.followers.size)
         self.other_leaders = np.array([[j for j in range(self.n_l) if j != i] for i in range(self.n_l)], dtype=np.int64)
         self.kind = (
             "single_integrator"
@@ -201,16 +205,28 @@ class Engine:
         self._at_rest = np.linalg.pinv(dyn.C).T  # x at rest from positions
         self.affine = AffineImage(fw.positions)
         self._H = np.hstack([fw.positions, np.ones((n, 1))])  # [r, 1] (n, d + 1)
-        self.v_bound = max(float(max_speed), self.u_max if self.kind == "single_integrator" else 0.0)
-        self.bounds = self.scenario.bounds
-        self.n_rays, self.n_nearest, self.k_nearest = int(n_rays), int(n_nearest), int(k_nearest)
+        self.v_bound: float = max(float(max_speed), self.u_max if self.kind == "single_integrator" else 0.0)
+        self.bounds: Array = self.scenario.bounds
+        self.n_rays: int = int(n_rays)
+        self.n_nearest: int = int(n_nearest)
+        self.k_nearest: int = int(k_nearest)
         self.ray_dirs = ray_directions(self.n_rays) if d == 2 else np.zeros((0, d))
         self.sense_radius = math.inf if sense_radius is None else float(sense_radius)
         self.obstacle_range = min(self.sensor_range, self.sense_radius)
         self.obstacles = self.scenario.obstacles
+        self._moving = [ob for ob in self.obstacles if ob.moves()]
         pairs = np.stack(np.triu_indices(n, 1), axis=1) if n <= ALL_PAIRS_UP_TO else fw.edge_array()
-        self._pi, self._pj = pairs[:, 0].copy(), pairs[:, 1].copy()
+        self._pi, self._pj = (np.ascontiguousarray(pairs[:, c], dtype=np.int64) for c in (0, 1))
         self._fast = 2.0 * self.agent_radius / math.sqrt(d)
+        if self._pi.size:
+            gaps = np.linalg.norm(fw.positions[self._pi] - fw.positions[self._pj], axis=1)
+            if gaps.min() < 2.0 * self.agent_radius:
+                warnings.warn(
+                    f"agents touch in the nominal formation: the closest pair is {gaps.min():.3g} m apart, less than "
+                    f"2 agent_radius = {2 * self.agent_radius:.3g} m; every episode would start in a collision "
+                    "(pass a smaller agent_radius)",
+                    stacklevel=2,
+                )
         self.observer = Observer(self, tuple(DEFAULT_OBSERVATION if observation is None else observation),
                                  float(obs_noise))  # fmt: skip
         self.obs_blocks = self.observer.slices
@@ -303,7 +319,7 @@ class Engine:
         if not sc.moving_goal:
             g = affine_batch(sc.r, params["goal_theta"], params["goal_b"])
             return g, np.zeros_like(g)
-        t = k * self.dt
+        t = self.dt * k.astype(np.float64)
         g0 = affine_batch(sc.r, *sc.reference(params, t))
         g1 = affine_batch(sc.r, *sc.reference(params, t + self.dt))
         return g0, (g1 - g0) * (1.0 / self.dt)
@@ -311,11 +327,13 @@ class Engine:
     def capsules(self, params: dict[str, Array], k: NDArray[np.int64]) -> Capsules:
         """Every obstacle's capsules after k samples (B,): the static ones of the episode and the moving ones
         at t = k T."""
-        B = k.shape[0]
-        parts = [Capsules(params["_ca"], params["_ce"], params["_cr"])]
-        parts += [ob.capsules(params[ob.key], k * self.dt, self.bounds) for ob in self.obstacles if ob.moves()]
-        parts = [c for c in parts if c.a.shape[1]]
-        return Capsules.join(parts, B, self.d)
+        static = Capsules(params["_ca"], params["_ce"], params["_cr"])
+        if not self._moving:
+            return static
+        parts = [static] if static.a.shape[1] else []
+        t = self.dt * k.astype(np.float64)
+        parts += [ob.capsules(params[ob.key], t, self.bounds) for ob in self._moving]
+        return Capsules.join(parts, k.shape[0], self.d)
 
     def _fit(self, pos: Array) -> tuple[Array, Array, Array]:
         """Least-squares affine fit of positions (B, n, d): Theta (B, d, d), b (B, d), RMS residual (B,) m."""
@@ -345,12 +363,13 @@ class Engine:
         B = pos.shape[0]
         clear = np.full(B, np.inf)
         if self._pi.size:
-            diff = pos[:, self._pi] - pos[:, self._pj]
-            clear = np.sqrt(np.einsum("bpd,bpd->bp", diff, diff).min(axis=1)) - 2.0 * self.agent_radius
+            clear = pair_clearance(pos, self._pi, self._pj) - 2.0 * self.agent_radius
         if caps.a.shape[1]:
             np.minimum(clear, clearance(pos, caps) - self.agent_radius, out=clear)
-            caps0 = self.capsules(params, prev.k)
-            moved = np.abs(pos - prev.pos).max(axis=(1, 2)) + np.abs(caps.a - caps0.a).max(axis=(1, 2), initial=0.0)
+            caps0 = self.capsules(params, prev.k) if self._moving else caps
+            moved = np.abs(pos - prev.pos).max(axis=(1, 2))
+            if self._moving:
+                moved += np.abs(caps.a - caps0.a).max(axis=(1, 2))
             fast = np.flatnonzero(moved > self._fast)
             if fast.size:  # swept contacts: the motion relative to each obstacle over the step
                 sub = lambda c: Capsules(*(f[fast] for f in c))  # noqa: E731
@@ -360,7 +379,9 @@ class Engine:
         oob = ((pos < lo) | (pos > hi)).any(axis=(1, 2))
         return clear, (clear < 0.0) | oob, oob
 
-    def context(self, state: EngineState, rng: np.random.Generator | Sequence[np.random.Generator] | None = None) -> StepContext:
+    def context(
+        self, state: EngineState, rng: np.random.Generator | Sequence[np.random.Generator] | None = None
+    ) -> StepContext:
         """The context of a state with no step behind it (a reset): no actions, no contacts judged."""
         B = state.batch_size
         theta, b, _ = self._fit(state.pos)
@@ -371,7 +392,9 @@ class Engine:
         return StepContext(self, state, None, acts, theta, b, clear, false, false, false, caps, rng)
 
     # ------------------------------------------------------------------ the API
-    def observe(self, state: EngineState, rng: np.random.Generator | Sequence[np.random.Generator] | None = None) -> NDArray[np.float32]:
+    def observe(
+        self, state: EngineState, rng: np.random.Generator | Sequence[np.random.Generator] | None = None
+    ) -> NDArray[np.float32]:
         """Observations of every leader, shape (B, n_l, obs_dim), float32 (layout: ``obs_blocks``)."""
         return self.observer(self.context(state, rng))
 
@@ -392,7 +415,10 @@ class Engine:
         return a
 
     def step(
-        self, state: EngineState, actions: ArrayLike, rng: np.random.Generator | Sequence[np.random.Generator] | None = None
+        self,
+        state: EngineState,
+        actions: ArrayLike,
+        rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
     ) -> tuple[EngineState, NDArray[np.float32], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
         """One sample of every environment.
 
@@ -416,8 +442,9 @@ class Engine:
         params = state.params
         caps = self.capsules(params, k)
         clear, collision, oob = self._contacts(state, pos, params, caps)
-        goal, goal_vel = self._goal(params, k)
-        gd = np.sqrt(np.einsum("bnd,bnd->bn", goal - pos, goal - pos))
+        goal, goal_vel = self._goal(params, k) if self.scenario.moving_goal else (state.goal, state.goal_vel)
+        delta = goal - pos
+        gd = np.sqrt(np.einsum("bnd,bnd->bn", delta, delta))
         theta, b, err = self._fit(pos)
         sc = self.scenario
         ok = sc.is_success(gd.max(axis=1), err) & ~collision
@@ -445,11 +472,11 @@ class Engine:
         moving obstacles' current state, time fraction."""
         B = state.batch_size
         theta = self._fit(state.pos)[0]
-        t = state.k * self.dt
+        t = self.dt * state.k.astype(np.float64)
         parts = [state.pos.reshape(B, -1), state.vel.reshape(B, -1), state.goal.reshape(B, -1)]
         parts += [state.goal_vel.reshape(B, -1), state.err[:, None], theta.reshape(B, -1), state.params["_pvec"]]
         parts += [ob.state_vector(state.params[ob.key], t, self.bounds) for ob in self.obstacles]
-        parts.append(state.k[:, None] * (1.0 / self.max_cycles))
+        parts.append(state.k[:, None].astype(np.float64) * (1.0 / self.max_cycles))
         out = np.concatenate(parts, axis=1)
         np.clip(out, self._state_lo64, self._state_hi64, out=out)
         return out.astype(np.float32)
@@ -500,7 +527,7 @@ class Engine:
             for f in EngineState._fields
             if f != "params"
         }
-        return EngineState(**fields, params=params)
+        return EngineState(**fields, params=params)  # type: ignore[arg-type]
 
     @staticmethod
     def select(state: EngineState, index: ArrayLike) -> EngineState:
@@ -510,11 +537,12 @@ class Engine:
         for arr in params.values():
             arr.setflags(write=False)
         fields = {f: None if getattr(state, f) is None else getattr(state, f)[idx] for f in EngineState._fields[:-1]}
-        return EngineState(**fields, params=params)
+        return EngineState(**fields, params=params)  # type: ignore[arg-type]
 
     @staticmethod
     def replace_rows(state: EngineState, rows: NDArray[np.int64], new: EngineState) -> EngineState:
         """``state`` with batch rows ``rows`` replaced by the rows of ``new`` (auto-resets)."""
+
         def put(old: Array | None, val: Array | None) -> Array | None:
             if old is None or val is None:
                 return old

@@ -35,86 +35,88 @@ def neutral_info(goal_distance: float, formation_error: float) -> StepInfo:
 class FormationEnv(ParallelEnv, EzPickle):
     """Leader-follower affine formation control (Zhao & Zelazo's stress-matrix laws, sampled in discrete time).
 
-    ## Description
+        ## Description
 
-    n agents in R^d (d = 2 or 3) form an affine image x_i* = Theta r_i + b of a nominal
-    configuration r (paper eq. 7). Only the n_l leaders are agents of this env; the n_f
-    followers run an analytic sampled-data law on the stress matrix Omega inside the step
-    (``follower_law``: ``stationary`` eq. 17, ``dynamic`` eq. 21 solved exactly,
-    ``dynamic_distributed`` with m Jacobi rounds, ``linear`` with the Riccati gain of Theorem 3).
-    By moving, the leaders steer the whole formation through translation, rotation, scaling
-    and shear (the affine image), e.g. shrinking it to pass a gap. Scenarios (``scenario``):
-    ``hold``, ``maneuver``, ``maneuver_3d``, ``narrow_passage``, ``obstacle_field``, ``moving_obstacles``
-    (``formation_env.env.scenarios``; each file's docstring gives its geometry and success test).
+        n agents in R^d (d = 2 or 3) form an affine image x_i* = Theta r_i + b of a nominal
+        configuration r (paper eq. 7). Only the n_l leaders are agents of this env; the n_f
+        followers run an analytic sampled-data law on the stress matrix Omega inside the step
+        (``follower_law``: ``stationary`` eq. 17, ``dynamic`` eq. 21 solved exactly,
+        ``dynamic_distributed`` with m Jacobi rounds, ``linear`` with the Riccati gain of Theorem 3).
+        By moving, the leaders steer the whole formation through translation, rotation, scaling
+        and shear (the affine image), e.g. shrinking it to pass a gap. Scenarios (``scenario``):
+        ``hold``, ``maneuver``, ``maneuver_3d``, ``narrow_passage``, ``obstacle_field``, ``moving_obstacles``
+        (``formation_env.env.scenarios``; each file's docstring gives its geometry and success test).
 
-    ## Action Space
+        ## Action Space
 
-    ``Box(-1, 1, (p,), float32)`` per leader, p = the input dimension (d for single and double
-    integrators). The action is scaled by ``u_max``: a velocity (m/s, single integrator) or an
-    acceleration (m/s^2, double integrator) per axis. Out-of-range actions are clipped to [-1, 1];
-    an action holding NaN or inf raises ``ValueError`` naming the agent and leaves the env unchanged.
-    Every leader's input also feeds the follower law as u_leaders (the dynamic laws use it).
+        ``Box(-1, 1, (p,), float32)`` per leader, p = the input dimension (d for single and double
+        integrators). The action is scaled by ``u_max``: a velocity (m/s, single integrator) or an
+        acceleration (m/s^2, double integrator) per axis. Out-of-range actions are clipped to [-1, 1];
+        an action holding NaN or inf raises ``ValueError`` naming the agent and leaves the env unchanged.
+        Every leader's input also feeds the follower law as u_leaders (the dynamic laws use it).
 
-    ## Observation Space
+        ## Observation Space
 
-    ``Box(low, high, (obs_dim,), float32)``, the same for every leader, in world axes and SI units;
-    every entry is clipped to its (finite) bounds. The observation is a list of declared blocks
-    (``observation=[...]``; ``obs_blocks`` maps each name to its slice). The default, ``formation_v0``'s,
-    is ``position, velocity, other_leaders, goal, goal_velocity, theta, time, formation_error, obstacles``:
-    obs_dim = 34 for the 2D default framework (3 leaders, 16 rays). The registered blocks
-    (:mod:`formation_env.env.observations`; d the dimension, W the world box, E its extent, v ``max_speed``,
-    k ``k_nearest``, R ``n_rays``, N ``n_nearest``):
+        ``Box(low, high, (obs_dim,), float32)``, the same for every leader, in world axes and SI units;
+        every entry is clipped to its (finite) bounds. The observation is a list of declared blocks
+        (``observation=[...]``; ``obs_blocks`` maps each name to its slice). The default, ``formation_v0``'s,
+        is ``position, velocity, other_leaders, goal, goal_velocity, theta, time, formation_error, obstacles``:
+        obs_dim = 34 for the 2D default framework (3 leaders, 16 rays). The registered blocks
+        (:mod:`formation_env.env.observations`; d the dimension, W the world box, E its extent, v ``max_speed``,
+        k ``k_nearest``, R ``n_rays``, N ``n_nearest``):
 
-OBSERVATION_TABLE
+    OBSERVATION_TABLE
 
-    Options for decentralised leaders: ``nearest_agents`` with ``k_nearest`` and ``sense_radius`` (m), which
-    also limits the obstacle range; ``agent_id``; ``obs_noise`` (Gaussian, each entry's units, on the
-    measurement blocks). ``state()`` (``state_space``) is the global vector: positions, velocities, goal
-    positions and goal velocities of all n agents, formation error, fitted Theta, the scenario's parameters,
-    the moving obstacles' current centres, velocities and radii, time fraction.
+        Options for decentralised leaders: ``nearest_agents`` with ``k_nearest`` and ``sense_radius`` (m), which
+        also limits the obstacle range; ``agent_id``; ``obs_noise`` (Gaussian, each entry's units, on the
+        measurement blocks). ``state()`` (``state_space``) is the global vector: positions, velocities, goal
+        positions and goal velocities of all n agents, formation error, fitted Theta, the scenario's parameters,
+        the moving obstacles' current centres, velocities and radii, time fraction.
 
-    ## Rewards
+        ## Rewards
 
-    Per leader i at each step, r_i = sum_t w_t term_t (:mod:`formation_env.env.rewards`; weights
-    ``reward_weights`` over the scenario's over the defaults; T = dt):
+        Per leader i at each step, r_i = sum_t w_t term_t (:mod:`formation_env.env.rewards`; weights
+        ``reward_weights`` over the scenario's over the defaults; T = dt):
 
-REWARD_TABLE
+    REWARD_TABLE
 
-    g_i: distance (m) of leader i to its goal position; e: affine-image formation error (m); a_i: the
-    clipped action. ``maneuver`` uses distance 1, progress 0, success 0; ``hold`` adds distance 0.1.
+        g_i: distance (m) of leader i to its goal position; e: affine-image formation error (m); a_i: the
+        clipped action. ``maneuver`` uses distance 1, progress 0, success 0; ``hold`` adds distance 0.1.
 
-    ## Starting State
+        ## Starting State
 
-    Drawn by the scenario from the env's ``np.random.Generator`` (reseeded by ``reset(seed=...)``):
-    leaders on a start pose at rest, followers near their targets.
+        Drawn by the scenario from the env's ``np.random.Generator`` (reseeded by ``reset(seed=...)``):
+        leaders on a start pose at rest, followers near their targets.
 
-    ## Episode End
+        ## Episode End
 
-    Terminated (all agents) on a collision or on success (all agents within ``goal_tol`` of their
-    goal positions and formation error below ``formation_tol`` for ``hold_steps`` samples;
-    ``maneuver`` does not end on success). Truncated after ``max_cycles`` steps.
+        Terminated (all agents) on a collision or on success (all agents within ``goal_tol`` of their
+        goal positions and formation error below ``formation_tol`` for ``hold_steps`` samples;
+        ``maneuver`` does not end on success). Truncated after ``max_cycles`` steps.
 
-    ## Arguments
+        ## Arguments
 
-    ``formation_v0.parallel_env(scenario="narrow_passage", dynamics="double_integrator",
-    follower_law="dynamic", dt=0.1, max_cycles=400, render_mode=None, **kwargs)`` with keyword
-    arguments ``framework`` (name or ``Framework``), ``omega``, ``law_params``, ``u_max`` (1.0),
-    ``agent_radius`` (0.1 m), ``n_rays`` (16), ``n_nearest`` (2), ``sensor_range`` (3 m),
-    ``max_speed`` (3 m/s), ``reward_weights``, and the scenario's own (e.g. ``gap_width``);
-    unknown ones raise TypeError. ``stationary`` is offered with single integrators only.
+        ``formation_v0.parallel_env(scenario="narrow_passage", dynamics="double_integrator",
+        follower_law="dynamic", dt=0.1, max_cycles=400, render_mode=None, **kwargs)`` with keyword
+        arguments ``framework`` (name or ``Framework``), ``omega``, ``law_params``, ``u_max`` (1.0),
+        ``agent_radius`` (0.1 m), ``n_rays`` (16), ``n_nearest`` (2), ``sensor_range`` (3 m),
+        ``max_speed`` (3 m/s), ``reward_weights``, and the scenario's own (e.g. ``gap_width``);
+        unknown ones raise TypeError. ``stationary`` is offered with single integrators only.
 
-    Info per agent per step (a fresh dict; ``reset`` gives every key with its neutral value): ``success``,
-    ``collision``, ``out_of_bounds`` (bool), ``formation_error``, ``min_clearance`` (m; smallest agent-agent
-    or agent-obstacle gap between surfaces), ``goal_distance`` (m; largest agent distance to its goal
-    position), ``time`` (s), ``control_effort`` (|u_i|^2 of this leader's applied input).
+        Info per agent per step (a fresh dict; ``reset`` gives every key with its neutral value): ``success``,
+        ``collision``, ``out_of_bounds`` (bool), ``formation_error``, ``min_clearance`` (m; smallest agent-agent
+        or agent-obstacle gap between surfaces), ``goal_distance`` (m; largest agent distance to its goal
+        position), ``time`` (s), ``control_effort`` (|u_i|^2 of this leader's applied input).
 
-    ## Version History
+        ## Version History
 
-    * v0: initial version.
+        * v0: initial version.
     """
 
-    __doc__ = (__doc__ or "").replace("OBSERVATION_TABLE", _indent(observation_table())).replace(
-        "REWARD_TABLE", _indent(reward_table())
+    __doc__ = (
+        (__doc__ or "")
+        .replace("OBSERVATION_TABLE", _indent(observation_table()))
+        .replace("REWARD_TABLE", _indent(reward_table()))
     )
 
     metadata: dict[str, Any] = {
@@ -213,8 +215,10 @@ REWARD_TABLE
         """Advance one sample with every live leader's action (see the class docstring)."""
         if self._state is None:
             raise FormationError("call reset() before step()")
-        if not self.agents:
-            raise FormationError("the episode is over: call reset() before step()")
+        if not self.agents:  # every agent is done: an empty step is a no-op (PettingZoo's loop), an action an error
+            if actions:
+                raise FormationError("the episode is over: call reset() before step()")
+            return {}, {}, {}, {}, {}
         if not isinstance(actions, dict) or set(actions) != set(self.agents):
             got = sorted(actions) if isinstance(actions, dict) else type(actions).__name__
             raise ValueError(f"step() needs a dict with an action for exactly the live agents {self.agents}, got {got}")

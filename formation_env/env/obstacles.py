@@ -46,9 +46,10 @@ __all__ = [
     "capsule_distance",
     "clearance",
     "nearest_vectors",
+    "pair_clearance",
     "path_clearance",
-    "ray_ranges",
     "ray_directions",
+    "ray_ranges",
 ]
 
 Array = NDArray[np.float64]
@@ -272,7 +273,9 @@ def _clearance_rows(p: Array, a: Array, e: Array, rad: Array, out: Array) -> Non
 
 
 @_jit
-def _path_rows(p0: Array, p1: Array, a0: Array, a1: Array, e: Array, rad: Array, out: Array) -> None:  # pragma: no cover
+def _path_rows(
+    p0: Array, p1: Array, a0: Array, a1: Array, e: Array, rad: Array, out: Array
+) -> None:  # pragma: no cover
     B, n, d = p0.shape
     m = a0.shape[1]
     tiny = 1e-300
@@ -297,7 +300,9 @@ def _path_rows(p0: Array, p1: Array, a0: Array, a1: Array, e: Array, rad: Array,
                     ff += d2 * r
                 denom = aa * ee - bb * bb
                 s = 0.0
-                if aa > tiny and denom > 1e-12 * aa * ee:
+                if ee <= tiny:  # the capsule's axis is a point: the nearest point of the path to it
+                    s = min(max(-cc / aa, 0.0), 1.0) if aa > tiny else 0.0
+                elif aa > tiny and denom > 1e-12 * aa * ee:
                     s = min(max((bb * ff - cc * ee) / denom, 0.0), 1.0)
                 t = (bb * s + ff) / ee if ee > tiny else 0.0
                 if t < 0.0:
@@ -343,7 +348,9 @@ def _ray_circle(ox: float, oy: float, ux: float, uy: float, cx: float, cy: float
 
 
 @_jit
-def _ray_rows(o: Array, u: Array, a: Array, e: Array, rad: Array, max_range: float, out: Array) -> None:  # pragma: no cover
+def _ray_rows(
+    o: Array, u: Array, a: Array, e: Array, rad: Array, max_range: float, out: Array
+) -> None:  # pragma: no cover
     B, l, _ = o.shape
     R = u.shape[0]
     m = a.shape[1]
@@ -358,7 +365,9 @@ def _ray_rows(o: Array, u: Array, a: Array, e: Array, rad: Array, max_range: flo
                     if r <= 0.0:
                         t = _ray_segment(ox, oy, ux, uy, ax, ay, ex, ey)
                     else:
-                        t = min(_ray_circle(ox, oy, ux, uy, ax, ay, r), _ray_circle(ox, oy, ux, uy, ax + ex, ay + ey, r))
+                        t = min(
+                            _ray_circle(ox, oy, ux, uy, ax, ay, r), _ray_circle(ox, oy, ux, uy, ax + ex, ay + ey, r)
+                        )
                         le = math.sqrt(ex * ex + ey * ey)
                         if le > 0.0 and t > 0.0:
                             nx, ny = -ey / le * r, ex / le * r
@@ -373,9 +382,30 @@ def _ray_rows(o: Array, u: Array, a: Array, e: Array, rad: Array, max_range: flo
                 out[b, i, k] = best
 
 
+@_jit
+def _pair_rows(p: Array, pi: NDArray[np.int64], pj: NDArray[np.int64], out: Array) -> None:  # pragma: no cover
+    B, _, d = p.shape
+    for b in prange(B):
+        best = np.inf
+        for k in range(pi.shape[0]):
+            dd = 0.0
+            for c in range(d):
+                w = p[b, pi[k], c] - p[b, pj[k], c]
+                dd += w * w
+            best = min(best, dd)
+        out[b] = math.sqrt(best)
+
+
 def _rows(kernel: Any, B: int) -> Any:
     """The kernel compiled for B rows: on threads from ``PARALLEL_FROM`` rows."""
     return kernel[1] if B >= PARALLEL_FROM else kernel[0]
+
+
+def pair_clearance(p: Array, pi: NDArray[np.int64], pj: NDArray[np.int64]) -> Array:
+    """Smallest centre distance (m) of the agent pairs (pi[k], pj[k]) in each environment, p (B, n, d) -> (B,)."""
+    out = np.empty(p.shape[0])
+    _rows(_pair_rows, p.shape[0])(p, pi, pj, out)
+    return out
 
 
 def clearance(p: Array, caps: Capsules) -> Array:

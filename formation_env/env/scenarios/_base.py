@@ -412,13 +412,8 @@ class Draw(NamedTuple):
 
 
 class DrawPlan:
-    """The draws of one episode laid out as columns of a (B, K) array, and the generator calls that fill it.
-
-    ``draw(rng, B)`` makes one call per draw for B episodes (the scenarios' batched stream);
-    ``draw_each(rngs)`` makes, per generator, one call per run of same-kind draws (``rng.random`` for
-    consecutive uniform draws, ``rng.standard_normal`` for normal ones), which consumes the stream
-    exactly as ``draw(rng, 1)`` does: uniform(lo, hi) is lo + (hi - lo) u, as numpy computes it.
-    """
+    """The draws of one episode: ``draw(rng, B)`` makes one generator call per draw for B episodes (the batched
+    stream); ``draw_each(rngs)`` one episode per generator, entry b equal to ``draw(rngs[b], 1)``."""
 
     def __init__(self, draws: Sequence[Draw]) -> None:
         names = [dr.name for dr in draws]
@@ -428,40 +423,9 @@ class DrawPlan:
             if dr.kind not in ("uniform", "normal", "sign"):
                 raise FormationError(f"draw {dr.name!r}: kind must be uniform, normal or sign, got {dr.kind!r}")
         self.draws = list(draws)
-        self.cols: dict[str, slice] = {}
-        lo: list[float] = []
-        span: list[float] = []
-        calls: list[list[Any]] = []  # [kind, start, stop] runs of the per-generator path
-        k = 0
-        for dr in self.draws:
-            size = int(np.prod(dr.shape, dtype=np.int64))
-            self.cols[dr.name] = slice(k, k + size)
-            a, b = (float(dr.bounds[0]), float(dr.bounds[1])) if dr.kind == "uniform" else (0.0, 1.0)
-            drawn = size > 0 and (dr.kind != "uniform" or b > a)
-            lo += [a] * size
-            span += [b - a if b > a else 0.0] * size
-            if drawn:
-                merge = calls and calls[-1][0] == dr.kind != "sign" and calls[-1][2] == k
-                if merge:
-                    calls[-1][2] = k + size
-                else:
-                    calls.append([dr.kind, k, k + size])
-            k += size
-        self.K = k
-        self.calls = [(str(c[0]), int(c[1]), int(c[2])) for c in calls]
-        lo_a, span_a = np.array(lo), np.array(span)
-        kinds = np.array(
-            [dr.kind for dr in self.draws for _ in range(self.cols[dr.name].start, self.cols[dr.name].stop)]
-        )
-        # draw_each maps u to lo + (hi - lo) u on the runs of uniform columns other than [0, 1]
-        scaled = np.concatenate([[0], (kinds == "uniform") & ((lo_a != 0.0) | (span_a != 1.0)), [0]])
-        edges = np.flatnonzero(np.diff(scaled.astype(np.int8)))
-        self._scaled = [(slice(a, b), lo_a[a:b], span_a[a:b]) for a, b in zip(edges[::2], edges[1::2], strict=True)]
-        self._sign = np.flatnonzero(kinds == "sign")
-        self._shapes = [(dr.name, self.cols[dr.name], dr.shape) for dr in self.draws]
 
     def draw(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
-        """One generator call per draw, each for all B episodes (the scenarios' ``reset(rng, B)`` stream)."""
+        """One generator call per draw, each for all B episodes."""
         out: dict[str, Array] = {}
         for dr in self.draws:
             size = (B, *dr.shape)
@@ -474,24 +438,6 @@ class DrawPlan:
         return out
 
     def draw_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
-        """One episode per generator: entry b equals ``draw(rngs[b], 1)``: per generator one call per run of
-        same-kind draws, each run drawn from every generator in turn (distinct generators: each still makes
-        its calls in the plan's order)."""
-        B = len(rngs)
-        raw = np.zeros((B, self.K))
-        for kind, a, b in self.calls:
-            rows = raw[:, a:b]
-            if kind == "uniform":
-                for g, row in zip(rngs, rows, strict=True):
-                    g.random(out=row)
-            elif kind == "normal":
-                for g, row in zip(rngs, rows, strict=True):
-                    g.standard_normal(out=row)
-            else:
-                for g, row in zip(rngs, rows, strict=True):
-                    row[:] = g.integers(0, 2, size=b - a)
-        if self._sign.size:
-            raw[:, self._sign] = 2.0 * raw[:, self._sign] - 1.0  # choice([-1, 1]) picks index integers(0, 2)
-        for cols, lo, span in self._scaled:
-            raw[:, cols] = lo + span * raw[:, cols]
-        return {name: raw[:, cols].reshape(B, *shape) for name, cols, shape in self._shapes}
+        """One episode per generator (its own stream, as a single reset draws it), stacked along B."""
+        each = [self.draw(g, 1) for g in rngs]
+        return {dr.name: np.concatenate([e[dr.name] for e in each]) for dr in self.draws}

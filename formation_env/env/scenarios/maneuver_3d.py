@@ -7,7 +7,7 @@ vector block (all zero here: no obstacles).
 
 from __future__ import annotations
 
-from typing import Any, ClassVar
+from typing import ClassVar
 
 from .maneuver import Maneuver
 

@@ -118,7 +118,6 @@ class NarrowPassage(Scenario):
     def param_high(self) -> Array:
         return np.array([self.wall_x[1], self.gap_center[1], self.gap_width[1]])
 
-
     def task_features(self, ctx: StepContext) -> Array:
         p = ctx.state.params
         eng = ctx.engine

@@ -1,0 +1,145 @@
+"""A plain numpy step: the oracle the engine's step is tested against (as gymnax checks its envs).
+
+Written for clarity, not speed, and apart from the engine: the follower law is the core's ``FollowerLaw.step``
+(not the engine's precomputed map), the geometry is broadcast numpy (not the compiled kernels), and the
+default observation and rewards follow ``formation_v0``'s docstring formula by formula.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from formation_env.env.engine import Engine, EngineState
+from formation_env.env.obstacles import Capsules
+
+
+# ---------------------------------------------------------------------------- geometry
+def capsule_distance(p, caps: Capsules):
+    """Surface distance from points p (B, n, d) to every capsule, (B, n, m)."""
+    w = p[:, :, None, :] - caps.a[:, None]
+    ee = np.sum(caps.e * caps.e, axis=-1)[:, None]
+    s = np.clip(np.sum(w * caps.e[:, None], axis=-1) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+    diff = w - s[..., None] * caps.e[:, None]
+    return np.linalg.norm(diff, axis=-1) - caps.rad[:, None]
+
+
+def path_distance(p0, p1, caps0: Capsules, caps1: Capsules, samples: int = 1001):
+    """Smallest distance between each agent's motion and each capsule over a step, by dense sampling of the
+    relative motion (B, n, m): an independent check of the closed-form segment-segment distance."""
+    best = np.full((p0.shape[0], p0.shape[1], caps0.a.shape[1]), np.inf)
+    for s in np.linspace(0.0, 1.0, samples):
+        q = p0 + s * (p1 - p0)
+        c = Capsules(caps0.a + s * (caps1.a - caps0.a), caps0.e, caps0.rad)
+        best = np.minimum(best, capsule_distance(q, c))
+    return best
+
+
+def ray_ranges(o, u, caps: Capsules, max_range: float, samples: int = 3001):
+    """Range along each ray (B, l, R) by marching the ray in small steps until it is inside a capsule, or within half
+    a step of a zero-thickness one (so a wall between two samples is found); the reading errs by about a step."""
+    ts = np.linspace(0.0, max_range, samples)
+    out = np.full((o.shape[0], o.shape[1], u.shape[0]), max_range)
+    slack = np.where(caps.rad > 0, 0.0, 0.5 * (ts[1] - ts[0]))[:, None, None, :]  # thin walls: half a step
+    for k, uk in enumerate(u):
+        pts = o[:, :, None, :] + ts[None, None, :, None] * uk  # (B, l, S, d)
+        B, l, S, d = pts.shape
+        dist = capsule_distance(pts.reshape(B, l * S, d), caps).reshape(B, l, S, -1)
+        inside = (dist <= slack).any(axis=-1)
+        first = np.where(inside.any(axis=-1), ts[np.argmax(inside, axis=-1)], max_range)
+        out[:, :, k] = first
+    return out
+
+
+# ---------------------------------------------------------------------------- the step
+def oracle_step(eng: Engine, state: EngineState, actions):
+    """(state', obs, rewards, terminated, truncated, info) of the default observation and rewards."""
+    a = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
+    u = eng.u_max * a
+    x1, mem1 = eng.law.step(state.x, u, state.memory)
+    pos = np.einsum("dq,bnq->bnd", eng.dynamics.C, x1)
+    if not eng.dynamics.discrete and not np.any(eng.dynamics.C @ eng.dynamics.B):
+        vel = np.einsum("dq,bnq->bnd", eng.dynamics.C @ eng.dynamics.A, x1)
+    else:
+        vel = (pos - state.pos) / eng.dt
+    k = state.k + 1
+    t = k * eng.dt
+    B, n, d = pos.shape
+    sc = eng.scenario
+    # goals
+    if sc.moving_goal:
+        th, b = sc.reference(state.params, t)
+        th1, b1 = sc.reference(state.params, t + eng.dt)
+        goal = np.einsum("bij,nj->bni", th, sc.r) + b[:, None]
+        goal_vel = (np.einsum("bij,nj->bni", th1, sc.r) + b1[:, None] - goal) / eng.dt
+    else:
+        goal = np.einsum("bij,nj->bni", state.params["goal_theta"], sc.r) + state.params["goal_b"][:, None]
+        goal_vel = np.zeros_like(goal)
+    # contacts
+    clear = np.full(B, np.inf)
+    pairs = [(i, j) for i in range(n) for j in range(i + 1, n)] if n <= 64 else [tuple(e) for e in eng.fw.edges]
+    for i, j in pairs:
+        clear = np.minimum(clear, np.linalg.norm(pos[:, i] - pos[:, j], axis=-1) - 2 * eng.agent_radius)
+    caps = eng.capsules(state.params, k)
+    if caps.a.shape[1]:
+        clear = np.minimum(clear, capsule_distance(pos, caps).min(axis=(1, 2)) - eng.agent_radius)
+        caps0 = eng.capsules(state.params, state.k)
+        moved = np.abs(pos - state.pos).max(axis=(1, 2)) + np.abs(caps.a - caps0.a).max(axis=(1, 2), initial=0.0)
+        for bb in np.flatnonzero(moved > 2 * eng.agent_radius / np.sqrt(d)):
+            c0, c1 = (Capsules(*(f[bb : bb + 1] for f in c)) for c in (caps0, caps))
+            sw = path_distance(state.pos[bb : bb + 1], pos[bb : bb + 1], c0, c1).min()
+            clear[bb] = min(clear[bb], sw - eng.agent_radius)
+    lo, hi = eng.bounds
+    oob = np.any((pos < lo) | (pos > hi), axis=(1, 2))
+    collision = (clear < 0) | oob
+    # affine fit
+    H = np.hstack([sc.r, np.ones((n, 1))])
+    coef = np.stack([np.linalg.lstsq(H, pos[bb], rcond=None)[0] for bb in range(B)])  # (B, d + 1, d)
+    theta = np.swapaxes(coef[:, :d], 1, 2)
+    err = np.sqrt(np.mean(np.sum((pos - H @ coef) ** 2, axis=-1), axis=1))
+    gd = np.linalg.norm(goal - pos, axis=-1)
+    ok = (gd.max(axis=1) < sc.goal_tol) & (err < sc.formation_tol) & ~collision
+    streak = np.where(ok, state.streak + 1, 0)
+    success = streak >= sc.hold_steps
+    terminated = collision | success if sc.terminate_on_success else collision
+    truncated = (k >= eng.max_cycles) & ~terminated
+    # the default observation, per leader
+    L = eng.leaders
+    ext = hi - lo
+    obs = []
+    for i in L:
+        others = [pos[:, j] - pos[:, i] for j in L if j != i]
+        if d == 2:
+            sense = ray_ranges(pos[:, [i]], eng.ray_dirs, caps, eng.obstacle_range)[:, 0] / eng.obstacle_range
+        else:
+            from formation_env.env.obstacles import nearest_vectors
+
+            sense = nearest_vectors(pos[:, [i]], caps, eng.n_nearest, eng.obstacle_range).reshape(B, -1)
+        parts = [
+            np.clip(pos[:, i], lo, hi),
+            np.clip(vel[:, i], -eng.v_bound, eng.v_bound),
+            *[np.clip(o, -ext, ext) for o in others],
+            np.clip(goal[:, i] - pos[:, i], -ext, ext),
+            np.clip(goal_vel[:, i], -eng.v_bound, eng.v_bound),
+            np.clip(theta.reshape(B, -1), -3, 3),
+            (k / eng.max_cycles)[:, None],
+            np.minimum(err, np.linalg.norm(ext))[:, None],
+            np.clip(sense, -1, 1),
+        ]
+        obs.append(np.concatenate(parts, axis=1))
+    obs = np.stack(obs, axis=1).astype(np.float32)
+    # rewards
+    w = eng.reward_weights
+    gl0, gl1 = state.goal_dist, gd[:, L]
+    rew = (
+        w["progress"] * (gl0 - gl1)
+        - w["distance"] * eng.dt * gl1
+        - w["formation"] * eng.dt * err[:, None]
+        - w["effort"] * eng.dt * np.sum(a * a, axis=-1) / eng.p
+        - w["collision"] * collision[:, None]
+        + w["success"] * success[:, None]
+    )
+    new = EngineState(x1, pos, vel, mem1, k, goal, goal_vel, gl1, err, streak, state.params)
+    info = {"success": success, "collision": collision, "out_of_bounds": oob, "formation_error": err,
+            "min_clearance": clear, "goal_distance": gd.max(axis=1), "time": t,
+            "control_effort": np.sum(u * u, axis=-1)}  # fmt: skip
+    return new, obs, rew, terminated, truncated, info

@@ -31,7 +31,7 @@ seeds 0..999), score = success rate first, then collision rate, then mean time t
 2. extended grid on 64 seeds: ``lookahead`` {3, 5} x ``trigger`` {2.5, 3.5, 5} x ``margin``
    {0.05, 0.08, 0.12} x ``kp`` {4, 6, 9} x ``align_tol`` {0.1, 0.15, 0.2}: best 6.89 s
    (lookahead 3, trigger 3.5; kp 6 and 9 are slower: the followers lag and the gate waits);
-3. final grid on 256 seeds (``tune_passage``, ``python -m agents.planner --tune``): lookahead 3,
+3. final grid on 256 seeds (``python -m agents.planner --tune narrow_passage``): lookahead 3,
    trigger 3.5, ``margin`` {0.05, 0.08} x ``kp`` {3, 4, 5} x ``align_tol`` {0.15, 0.2, 0.25, 0.3}:
    every setting 100 % success and 0 collisions; best margin 0.08, kp 4, align_tol 0.3: 6.62 s
    (the scenario's own ``scripted_action`` takes 11.3 s on the same kind of episodes).
@@ -419,22 +419,30 @@ def rollout_stats(engine: Engine, planner: Any, seeds: NDArray[np.int64] | list[
     }
 
 
-def tune_passage(n_seeds: int = 256, seed0: int = 10_000) -> tuple[dict[str, float], list[tuple[Any, ...]]]:
-    """Grid search of :class:`PassagePlanner` on training seeds ``seed0 .. seed0 + n_seeds - 1``.
+#: Tuning grids per scenario (planner parameters -> values), searched on the training seeds.
+TUNING_GRIDS: dict[str, dict[str, list[float]]] = {
+    "narrow_passage": {"lookahead": [3.0], "trigger": [3.5], "margin": [0.05, 0.08], "kp": [3.0, 4.0, 5.0],
+                       "align_tol": [0.15, 0.2, 0.25, 0.3]},
+    "hold": {"lookahead": [0.5, 1.0, 1.5, 2.0, 3.0], "kp": [2.0, 3.0, 4.0, 6.0]},
+    "moving_obstacles": {"scale": [0.4, 0.45, 0.5], "speed": [1.3, 1.6], "margin": [0.2, 0.25, 0.35]},
+}  # fmt: skip
 
-    Returns the best parameters and every (params, stats) row.
-    """
+
+def tune(scenario: str, n_seeds: int = 256, seed0: int = 10_000) -> tuple[dict[str, Any], list[tuple[Any, ...]]]:
+    """Grid search (``TUNING_GRIDS``) of a scenario's planner on training seeds ``seed0 .. seed0 + n_seeds - 1``
+    (disjoint from the evaluation suites' seeds 0..999), scored by success rate, then collision rate, then mean
+    time to goal. Returns the best parameters and every (params, stats) row, best first."""
     import itertools
 
     from formation_env.env.engine import Engine
 
-    engine = Engine("narrow_passage")
+    engine = Engine(scenario)
     seeds = list(range(seed0, seed0 + n_seeds))
+    grid = TUNING_GRIDS[scenario]
     rows = []
-    for mg, kp, at in itertools.product([0.05, 0.08], [3.0, 4.0, 5.0], [0.15, 0.2, 0.25, 0.3]):
-        pl = PassagePlanner(lookahead=3.0, trigger=3.5, margin=mg, kp=kp, align_tol=at)
-        st = rollout_stats(engine, pl, seeds)
-        rows.append((asdict(pl), st))
+    for values in itertools.product(*grid.values()):
+        params = dict(zip(grid, values, strict=True))
+        rows.append((params, rollout_stats(engine, make_planner(scenario, **params), seeds)))
     rows.sort(key=lambda t: (-t[1]["success_rate"], t[1]["collision_rate"], t[1]["time_to_goal"]))
     return rows[0][0], rows
 
@@ -444,7 +452,10 @@ if __name__ == "__main__":
     import sys
 
     if "--tune" in sys.argv:
-        best, rows = tune_passage()
+        name = sys.argv[sys.argv.index("--tune") + 1] if len(sys.argv) > sys.argv.index("--tune") + 1 else ""
+        if name not in TUNING_GRIDS:
+            sys.exit(f"usage: python -m agents.planner --tune {{{','.join(TUNING_GRIDS)}}}")
+        best, rows = tune(name)
         for p_, s_ in rows[:10]:
             print(json.dumps(p_), json.dumps(s_))
         print("best:", json.dumps(best))

@@ -249,3 +249,53 @@ def test_reset_infos_carry_every_step_key():
     for a in env.possible_agents:
         assert set(infos[a]) == set(step_infos[a])
         assert infos[a]["success"] is False and infos[a]["collision"] is False and infos[a]["time"] == 0.0
+
+
+@pytest.mark.parametrize("how", ["pickle", "deepcopy"])
+def test_copies_continue_the_episode_bit_identically(how):
+    import copy
+
+    from formation_env.env.commander import FormationCommanderEnv
+    from formation_env.env.vector import FormationVecEnv
+
+    clone = (lambda e: pickle.loads(pickle.dumps(e))) if how == "pickle" else copy.deepcopy
+    env = formation_v0.parallel_env(scenario="moving_obstacles", obs_noise=0.01)
+    env.reset(seed=3)
+    acts = {a: np.full(2, 0.3, np.float32) for a in env.agents}
+    for _ in range(5):
+        env.step(acts)
+    twin = clone(env)
+    for _ in range(5):
+        o1, r1, *_ = env.step(acts)
+        o2, r2, *_ = twin.step(acts)
+        assert r1 == r2 and all(np.array_equal(o1[a], o2[a]) for a in o1)
+    venv = FormationVecEnv("hold", num_envs=3, seed=0, max_cycles=4)
+    venv.reset()
+    zero = np.zeros((venv.num_envs, venv.p))
+    venv.step(zero)
+    vtwin = clone(venv)
+    for _ in range(7):  # across auto-resets
+        a, b = venv.step(zero), vtwin.step(zero)
+        np.testing.assert_array_equal(a[0], b[0])
+        np.testing.assert_array_equal(a[1], b[1])
+    cmd = FormationCommanderEnv("narrow_passage")
+    cmd.reset(seed=1)
+    cmd.step(np.zeros(6))
+    ctwin = clone(cmd)
+    np.testing.assert_array_equal(cmd.step(np.full(6, 0.2))[0], ctwin.step(np.full(6, 0.2))[0])
+
+
+def test_commander_refuses_wrong_shapes_and_steps_after_the_end():
+    from formation_env.env.commander import FormationCommanderEnv
+
+    cmd = FormationCommanderEnv("hold", max_cycles=2)
+    with pytest.raises(FormationError, match="reset"):
+        cmd.step(np.zeros(6))
+    cmd.reset(seed=0)
+    with pytest.raises(ValueError, match="shape"):
+        cmd.step(np.zeros((2, 3)))
+    cmd.step(np.zeros(6))
+    _, _, _, truncated, _ = cmd.step(np.zeros(6))
+    assert truncated
+    with pytest.raises(FormationError, match="over"):
+        cmd.step(np.zeros(6))

@@ -280,5 +280,18 @@ class FormationEnv(ParallelEnv, EzPickle):
             self._renderer.close()
             self._renderer = None
 
+    # ------------------------------------------------------------------ copies
+    def __getstate__(self) -> dict[str, Any]:
+        """The constructor's arguments (``EzPickle``) and the episode in progress: a pickled or deep-copied env
+        continues the episode where the original is, with the same generator."""
+        return {**EzPickle.__getstate__(self), "episode": (self._state, self._rng, list(self.agents), self._trail)}
+
+    def __setstate__(self, d: dict[str, Any]) -> None:
+        d = dict(d)
+        episode = d.pop("episode", None)
+        EzPickle.__setstate__(self, d)
+        if episode is not None:
+            self._state, self._rng, self.agents, self._trail = episode
+
     def __str__(self) -> str:
         return "formation_v0"

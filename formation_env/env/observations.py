@@ -273,6 +273,13 @@ class Observer:
         self.noise = float(noise)
         self.noise_mask = np.concatenate(noisy).astype(np.float64)
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Blocks by name (their functions are looked up again on unpickling: registered blocks pickle by name)."""
+        return {**self.__dict__, "blocks": [blk.name for blk in self.blocks]}
+
+    def __setstate__(self, d: dict[str, Any]) -> None:
+        self.__dict__.update(d, blocks=[OBS_BLOCKS[nm] for nm in d["blocks"]])
+
     def __call__(self, ctx: StepContext) -> NDArray[np.float32]:
         """Every leader's observation, (B, n_l, obs_dim) float32, clipped to the bounds."""
         parts: list[Any] = [blk.fn(ctx) for blk in self.blocks]

@@ -161,6 +161,7 @@ class FormationVecEnv(VecEnv):
 
     def step_async(self, actions: ArrayLike) -> None:
         """Check and store the actions of every slot: (num_envs, p) shared, (num_envs, n_l p) commander."""
+        self._actions = None  # a failed call leaves nothing behind for step_wait
         if self.state is None:
             raise FormationError("reset() must be called before step()")
         expect = (self.num_envs, int(self.action_space.shape[0]))  # type: ignore[index]

@@ -205,7 +205,9 @@ def _congruence(edges: NDArray[np.int64], basis: NDArray[np.float64], v: NDArray
 
 def _solve(fw: Framework, method: str, rtol: float, solver: str | None, verbose: bool) -> NDArray[np.float64]:
     """Run the SDP ``method`` with each solver in turn; return the first verified, scaled stress."""
-    import cvxpy as cp
+    from formation_env._extras import require
+
+    cp: Any = require("cvxpy", "design", f"design_stress(method={method!r})")
 
     if solver is not None and solver not in cp.installed_solvers():
         raise ValueError(f"solver {solver!r} is not an installed cvxpy solver; installed: {cp.installed_solvers()}")

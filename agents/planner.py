@@ -34,12 +34,16 @@ seeds 0..999), score = success rate first, then collision rate, then mean time t
 3. final grid on 256 seeds (``python -m agents.planner --tune narrow_passage``): lookahead 3,
    trigger 3.5, ``margin`` {0.05, 0.08} x ``kp`` {3, 4, 5} x ``align_tol`` {0.15, 0.2, 0.25, 0.3}:
    every setting 100 % success and 0 collisions; best margin 0.08, kp 4, align_tol 0.3: 6.62 s
-   (the scenario's own ``scripted_action`` takes 11.3 s on the same kind of episodes).
+   (the reference policy ``agents.scripted.passage_action`` takes 11.3 s on the same kind of episodes).
 
 The defaults are that best setting. A trigger of 3.5 m means the team squeezes almost from the
 start (the start is 3.5-4.5 m before the wall); with wider worlds it still only squeezes near the
 wall. Lower bound for comparison: a bang-bang double integrator at u_max = 1 m/s^2 needs
 2 sqrt(D) s for a rest-to-rest move of D m (D = 7-9 m here: 5.3-6.0 s), before formation settling.
+
+``hold`` (:class:`HoldPlanner`): pose interpolation through invertible poses (polar factors), so no two agents
+cross on the way to the goal pose. ``moving_obstacles`` (:class:`CrossingPlanner`): shrink, wait for a crossing
+window predicted clear of every moving disc, cross, restore. Their tuning is in their docstrings.
 
 ``maneuver`` (:class:`ManeuverPlanner`): the reference is known, so the leaders track
 x_l*((k+1) T) with its velocity as feedforward.
@@ -238,12 +242,13 @@ class HoldPlanner:
         kp: tracking gain of ``track_targets``.
 
     Tuned on training seeds 10_000..10_255 (``python -m agents.planner --tune hold``) over ``lookahead``
-    {0.5, 1, 1.5, 2, 3} x ``kp`` {2, 3, 4, 6}, score success, then collisions, then time to goal; the
-    defaults are the best setting.
+    {1, 1.5, 2} x ``kp`` {4, 6, 8, 10} (a first grid, lookahead {0.5, 1, 1.5, 2, 3} x kp {2, 3, 4, 6}, had its
+    best at kp 6, the edge), score success, then collisions, then time to goal: the defaults, lookahead 1.5 and
+    kp 6, reached 100 % success, no collision, 4.47 s to the goal (held for the 10 samples the test needs).
     """
 
     lookahead: float = 1.5
-    kp: float = 4.0
+    kp: float = 6.0
 
     def __call__(self, engine: Engine, state: EngineState) -> Array:
         """Leader actions in [-1, 1], shape (B, n_l, p)."""
@@ -315,12 +320,16 @@ class CrossingPlanner:
         lookahead: largest distance (m) of the centre target ahead of the fitted centre.
         kp: tracking gain of ``track_targets``.
 
-    Tuned on training seeds 10_000..10_255 (``python -m agents.planner --tune moving_obstacles``).
+    Tuned on training seeds 10_000..10_255 (``python -m agents.planner --tune moving_obstacles``) over ``scale``
+    {0.4, 0.45, 0.5} x ``speed`` {1.3, 1.6} x ``margin`` {0.2, 0.25, 0.35} (score: success, then collisions,
+    then time to goal): the defaults, scale 0.4, speed 1.6, margin 0.2, reached 100 % success, no collision,
+    12.0 s to the goal; 11 of the 18 settings reached 100 %, none collided. A gradual shrink mattered: shrinking
+    at once let the followers bunch up (agent-agent contacts in 1-3 % of episodes).
     """
 
-    scale: float = 0.45
+    scale: float = 0.4
     speed: float = 1.6
-    margin: float = 0.25
+    margin: float = 0.2
     accel: float = 0.7
     slack: float = 0.4
     shrink_step: float = 0.5
@@ -423,7 +432,7 @@ def rollout_stats(engine: Engine, planner: Any, seeds: NDArray[np.int64] | list[
 TUNING_GRIDS: dict[str, dict[str, list[float]]] = {
     "narrow_passage": {"lookahead": [3.0], "trigger": [3.5], "margin": [0.05, 0.08], "kp": [3.0, 4.0, 5.0],
                        "align_tol": [0.15, 0.2, 0.25, 0.3]},
-    "hold": {"lookahead": [0.5, 1.0, 1.5, 2.0, 3.0], "kp": [2.0, 3.0, 4.0, 6.0]},
+    "hold": {"lookahead": [1.0, 1.5, 2.0], "kp": [4.0, 6.0, 8.0, 10.0]},
     "moving_obstacles": {"scale": [0.4, 0.45, 0.5], "speed": [1.3, 1.6], "margin": [0.2, 0.25, 0.35]},
 }  # fmt: skip
 

@@ -19,3 +19,14 @@ def test_architecture_guide_code_runs():
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=300)
     assert res.returncode == 0, res.stderr[-3000:]
     assert res.stdout.strip().endswith("guide ran")
+
+
+def test_readme_python_snippets_run():
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    assert len(blocks) >= 3
+    code = "\n".join(blocks) + "\nprint('readme ran')\n"
+    env = {**__import__("os").environ, "SDL_VIDEODRIVER": "dummy"}
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=600, env=env)
+    assert res.returncode == 0, res.stderr[-3000:]
+    assert res.stdout.strip().endswith("readme ran")

@@ -42,7 +42,7 @@ def _compare(new, ref, obs, obs_ref, rew, rew_ref, flags, flags_ref, info, info_
     np.testing.assert_allclose(new.goal, ref.goal, atol=1e-9)
     np.testing.assert_allclose(new.goal_vel, ref.goal_vel, atol=1e-8)
     np.testing.assert_array_equal(new.streak, ref.streak)
-    np.testing.assert_allclose(obs, obs_ref, atol=2e-3)  # the marched rays: 0.5 mm steps over the range
+    np.testing.assert_allclose(obs, obs_ref, atol=2e-3)  # the marched rays: 1 mm steps over the range
     np.testing.assert_allclose(rew, rew_ref, atol=1e-8)
     for f, g in zip(flags, flags_ref, strict=True):
         np.testing.assert_array_equal(f, g)

@@ -58,7 +58,7 @@ margin 0.12 kept (0.2 s slower than 0.08, more clearance).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 import numpy as np

@@ -23,10 +23,10 @@ from datetime import datetime, timezone
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
-from formation_env.core.analysis import extreme_eigenvalues  # noqa: E402
-from formation_env.core.design import design_stress  # noqa: E402
-from formation_env.core.frameworks import trilateration  # noqa: E402
-from formation_env.core.stress import Partition  # noqa: E402
+from formation_env.core.analysis import extreme_eigenvalues
+from formation_env.core.design import design_stress
+from formation_env.core.frameworks import trilateration
+from formation_env.core.stress import Partition
 
 
 def row(n: int, d: int, k: int | None) -> str:
@@ -40,19 +40,20 @@ def row(n: int, d: int, k: int | None) -> str:
     steps = math.log(1e-6) / math.log(rho)
     t_opt = 2 / (lo + hi)
     label = f"{len(fw.leaders)} (default)" if k is None else str(k)
-    return (
-        f"| {n:,} | {label} | {cond:,.0f} | {t_opt:.3g} | {steps:,.0f} | {int(fw.degree().max())} "
-        f"| {t_design:.2f} |"
-    )
+    return f"| {n:,} | {label} | {cond:,.0f} | {t_opt:.3g} | {steps:,.0f} | {int(fw.degree().max())} | {t_design:.2f} |"
 
 
 def main(argv: list[str]) -> None:
     sizes = (100, 1000) if "--quick" in argv else (100, 1000, 10000)
     d = 2
-    print(f"Machine: {platform.node()} ({platform.machine()}, {os.cpu_count()} cores), Python "
-          f"{platform.python_version()}; {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC")
+    print(
+        f"Machine: {platform.node()} ({platform.machine()}, {os.cpu_count()} cores), Python "
+        f"{platform.python_version()}; {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC"
+    )
     print("Command: `python -m benchmarks.conditioning`\n")
-    print("| n | leaders k | cond(Omega_ff) | T_opt (s) | samples to 1e-6 at T_opt | max degree | build + design + check (s) |")
+    print(
+        "| n | leaders k | cond(Omega_ff) | T_opt (s) | samples to 1e-6 at T_opt | max degree | build + design + check (s) |"
+    )
     print("|---:|---:|---:|---:|---:|---:|---:|")
     for n in sizes:
         ks = sorted({d + 1, max(d + 1, n // 400), max(d + 1, n // 200), max(d + 1, n // 100)})

@@ -67,8 +67,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from .errors import ControlDimension, FrameworkError, StressMatrixError
 from .framework import Framework
-from .validation import check_framework, check_rtol
 from .stress import DEFAULT_RTOL, Partition, StressLike, check_stress, equilibrium_stress_basis, stress_from_weights
+from .validation import check_framework, check_rtol
 
 __all__ = [
     "METHODS",

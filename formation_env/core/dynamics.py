@@ -179,7 +179,9 @@ def _check_spd(m: NDArray[np.float64], name: str) -> None:
     """Raise FormationError unless ``m`` is symmetric positive definite."""
     scale = float(np.max(np.abs(m))) if m.size else 0.0
     if np.max(np.abs(m - m.T)) > 1e-10 * max(scale, 1.0):
-        raise FormationError(f"{name} must be symmetric positive definite, got max |{name} - {name}^T| = {np.max(np.abs(m - m.T)):.3g}")
+        raise FormationError(
+            f"{name} must be symmetric positive definite, got max |{name} - {name}^T| = {np.max(np.abs(m - m.T)):.3g}"
+        )
     lo = float(np.min(np.linalg.eigvalsh(m)))
     if lo <= 0:
         raise FormationError(f"{name} must be symmetric positive definite, got smallest eigenvalue {lo:.3g}")

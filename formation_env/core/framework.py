@@ -131,9 +131,11 @@ class Framework:
         object.__setattr__(self, "leaders", lead)
         object.__setattr__(self, "name", name)
         if cliques is not None:
-            cl = as_index_array(np.asarray(cliques).ravel(), "cliques", n=n).reshape(-1, d + 2) if np.size(
-                cliques
-            ) % (d + 2) == 0 else None
+            cl = (
+                as_index_array(np.asarray(cliques).ravel(), "cliques", n=n).reshape(-1, d + 2)
+                if np.size(cliques) % (d + 2) == 0
+                else None
+            )
             if cl is None or np.ndim(cliques) != 2 or cl.shape[0] != n - d - 1:
                 raise ControlDimension(
                     f"cliques must have shape (n - d - 1, d + 2) = ({n - d - 1}, {d + 2}), got {np.shape(cliques)}"

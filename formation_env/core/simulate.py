@@ -191,7 +191,9 @@ def simulate(
     if dynamics is not None:
         check_dynamics(dynamics)
     if leader_path is not None and not callable(leader_path):
-        raise TypeError(f"leader_path must be None or a callable k -> leader positions, got {type(leader_path).__name__}")
+        raise TypeError(
+            f"leader_path must be None or a callable k -> leader positions, got {type(leader_path).__name__}"
+        )
     require_stable_law = check_bool(require_stable_law, "require_stable_law")
     return_result = check_bool(return_result, "return_result")
     n = part.n

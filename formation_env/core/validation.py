@@ -30,18 +30,18 @@ __all__ = [
     "as_array",
     "as_index_array",
     "check_bool",
+    "check_dt",
+    "check_dynamics",
     "check_finite",
+    "check_framework",
+    "check_int",
     "check_kwargs_consumed",
     "check_real_scalar",
     "check_rtol",
+    "check_seed",
     "check_shape",
     "check_square_matrix",
     "check_symmetric",
-    "check_int",
-    "check_dt",
-    "check_dynamics",
-    "check_framework",
-    "check_seed",
 ]
 
 

@@ -100,17 +100,19 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="formation-env", description=__doc__)
+    parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True)
-    p = sub.add_parser("reproduce", help="reproduce the paper's 5-agent example")
+    fmt = {"formatter_class": argparse.ArgumentDefaultsHelpFormatter}
+    p = sub.add_parser("reproduce", **fmt, help="reproduce the paper's 5-agent example")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--exact", action="store_true", help="use the projected exact stress instead of the printed one")
     p.add_argument("--out", default="out", help="folder for the figure (default: out)")
     p.set_defaults(func=cmd_reproduce)
-    p = sub.add_parser("report", help="the main job: reproduction and evaluation report (markdown + figures)")
+    p = sub.add_parser("report", **fmt, help="the main job: reproduction and evaluation report (markdown + figures)")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quick", action="store_true", help="fewer evaluation episodes")
     p.set_defaults(func=cmd_report)
-    p = sub.add_parser("rollout", help="render one episode to a GIF or MP4")
+    p = sub.add_parser("rollout", **fmt, help="render one episode to a GIF or MP4")
     p.add_argument("--scenario", default="narrow_passage")
     p.add_argument("--policy", default="random", help="random, analytic, or a saved model's path")
     p.add_argument("--steps", type=int, default=400)
@@ -119,12 +121,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env-kwargs", default="", help='JSON dict of env arguments, e.g. {"dt": 0.05}')
     p.add_argument("--out", default="out/rollout.gif", help="output .gif or .mp4")
     p.set_defaults(func=cmd_rollout)
-    p = sub.add_parser("evaluate", help="evaluate a policy on a seeded suite (success, collisions, time to goal)")
+    p = sub.add_parser("evaluate", **fmt, help="evaluate a policy on a seeded suite (success, collisions, time to goal)")
     from train.evaluate import add_arguments
 
     add_arguments(p)
     p.set_defaults(func=cmd_evaluate)
-    p = sub.add_parser("bench", help="run the benchmarks and write BENCHMARKS.md")
+    p = sub.add_parser("bench", **fmt, help="run the benchmarks and write BENCHMARKS.md")
     p.add_argument("--only", nargs="*", help="sections (core, design, env)")
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default="BENCHMARKS.md")
@@ -132,9 +134,27 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: Errors that are the user's (a bad value, a missing or corrupt file, invalid JSON, an unwritable output):
+#: one line on stderr and exit code 2; ``--debug`` shows the traceback instead.
+USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, TypeError, KeyError, OSError, ImportError)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    return int(args.func(args))
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    for name in ("episodes", "steps", "seed"):
+        value = getattr(args, name, None)
+        if isinstance(value, int) and (value < 0 or (value == 0 and name != "seed")):
+            parser.error(f"--{name} must be {'>= 0' if name == 'seed' else 'a positive integer'}, got {value}")
+    try:
+        return int(args.func(args))
+    except USER_ERRORS as exc:
+        if args.debug:
+            raise
+        what = type(exc).__name__
+        msg = str(exc).splitlines()[0] if str(exc) else what
+        print(f"formation-env {args.command}: {msg} ({what}; --debug shows the traceback)", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

@@ -296,9 +296,11 @@ def save_gif(engine: Engine, policy: Any, seeds: Sequence[int], result: dict[str
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
     """The evaluation options (shared by ``python -m train.evaluate`` and ``formation-env evaluate``)."""
+    from formation_env.env.scenarios import REGISTRY
+
     p.add_argument("--policy", default="analytic", help="analytic, or a saved model's .zip path")
-    p.add_argument("--scenario", default="narrow_passage")
-    p.add_argument("--episodes", type=int, default=100)
+    p.add_argument("--scenario", default="narrow_passage", choices=sorted(REGISTRY))
+    p.add_argument("--episodes", type=int, default=100, help="episodes of the suite")
     p.add_argument("--seed", type=int, default=0, help="first episode seed of the suite")
     p.add_argument("--json", action="store_true", help='print one JSON object {"metrics": {...}}')
     p.add_argument("--out", default=None, help="folder for CSV/JSON/markdown, plots and a GIF")

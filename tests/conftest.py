@@ -25,7 +25,14 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np
 import scipy.linalg as sla
+from hypothesis import settings
 from hypothesis import strategies as st
+
+# Property tests draw the same examples on every run (a CI run is reproducible; a failure found by a random
+# search is then a test to add, not a flake): HYPOTHESIS_PROFILE=random searches afresh.
+settings.register_profile("repro", derandomize=True, print_blob=True)
+settings.register_profile("random", print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repro"))
 
 try:  # the package is not installed in every checkout: import it from the repository
     import formation_env  # noqa: F401

@@ -13,11 +13,11 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from numpy.typing import NDArray
 
-from .dynamics import LinearDynamics
+from .dynamics import LinearDynamics, check_dynamics
 from .errors import FormationError, UnstableParameterError
 from .laws import DynamicLeaderLaw, FollowerLaw, StressFeedbackLaw, make_law
 from .stress import DEFAULT_RTOL, Partition, check_partition
-from .validation import check_bool, check_dt, check_dynamics, check_rtol
+from .validation import check_bool, check_dt, check_rtol
 
 __all__ = ["DT_SEARCH", "StabilityReport", "dt_interval", "extreme_eigenvalues", "stability_report", "stable_windows"]
 

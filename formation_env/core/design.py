@@ -66,9 +66,9 @@ import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import ControlDimension, FrameworkError, StressMatrixError
-from .framework import Framework
+from .framework import Framework, check_framework
 from .stress import DEFAULT_RTOL, Partition, StressLike, check_stress, equilibrium_stress_basis, stress_from_weights
-from .validation import check_framework, check_rtol
+from .validation import check_rtol
 
 __all__ = [
     "METHODS",

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import ControlDimension, FormationError
-from .validation import as_array, check_bool, check_dt, check_int, check_shape
+from .validation import _describe, as_array, check_bool, check_dt, check_int, check_shape
 
 __all__ = ["LinearDynamics", "c2d_zoh", "dare", "dlqr", "riccati_gain"]
 
@@ -267,3 +268,10 @@ def dlqr(
     P = dare(a, b, Q, R)
     K = np.linalg.solve(as_array(R, "R", ndim=2) + b.T @ P @ b, b.T @ P @ a)
     return np.asarray(K, dtype=np.float64), P, np.asarray(np.linalg.eigvals(a - b @ K), dtype=np.complex128)
+
+
+def check_dynamics(dyn: Any, name: str = "dynamics") -> Any:
+    """A :class:`~formation_env.core.dynamics.LinearDynamics` (None is not accepted here)."""
+    if not isinstance(dyn, LinearDynamics):
+        raise TypeError(f"{name} must be a LinearDynamics, got {_describe(dyn)}")
+    return dyn

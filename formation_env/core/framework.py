@@ -9,12 +9,13 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import ControlDimension, FormationError, FrameworkError
-from .validation import as_array, as_index_array
+from .validation import _describe, as_array, as_index_array
 
 __all__ = ["Framework", "affine_rank", "check_leaders_span"]
 
@@ -178,3 +179,10 @@ class Framework:
     def edge_array(self) -> NDArray[np.int64]:
         """Edges as an integer array, shape (m, 2)."""
         return np.asarray(self.edges, dtype=np.int64).reshape(-1, 2)
+
+
+def check_framework(fw: Any, name: str = "fw") -> Any:
+    """A :class:`~formation_env.core.framework.Framework`."""
+    if not isinstance(fw, Framework):
+        raise TypeError(f"{name} must be a Framework, got {_describe(fw)}")
+    return fw

@@ -34,10 +34,10 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import NDArray
 
-from .dynamics import LinearDynamics, riccati_gain
+from .dynamics import LinearDynamics, check_dynamics, riccati_gain
 from .errors import ControlDimension, FormationError, UnstableParameterError
 from .stress import Partition
-from .validation import as_array, check_dt, check_dynamics, check_int, check_real_scalar
+from .validation import as_array, check_dt, check_int, check_real_scalar
 
 __all__ = [
     "LAWS",

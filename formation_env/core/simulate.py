@@ -11,11 +11,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .analysis import require_stable
-from .dynamics import LinearDynamics
+from .dynamics import LinearDynamics, check_dynamics
 from .errors import ControlDimension, LawAssumptionWarning, ReachabilityWarning, StabilityWarning
 from .laws import FollowerLaw, make_law
 from .stress import DEFAULT_RTOL, Partition, check_partition
-from .validation import as_array, check_bool, check_dt, check_dynamics, check_int, check_rtol
+from .validation import as_array, check_bool, check_dt, check_int, check_rtol
 
 __all__ = ["SimResult", "simulate"]
 

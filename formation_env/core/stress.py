@@ -25,12 +25,11 @@ import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import ControlDimension, FormationError, FrameworkError, StressMatrixError
-from .framework import Framework, check_leaders_span
+from .framework import Framework, check_framework, check_leaders_span
 from .validation import (
     as_array,
     as_index_array,
     check_bool,
-    check_framework,
     check_int,
     check_rtol,
     check_square_matrix,

@@ -31,9 +31,7 @@ __all__ = [
     "as_index_array",
     "check_bool",
     "check_dt",
-    "check_dynamics",
     "check_finite",
-    "check_framework",
     "check_int",
     "check_kwargs_consumed",
     "check_real_scalar",
@@ -295,24 +293,6 @@ def check_symmetric(mat: Any, name: str, rtol: float) -> None:
             f"{name} must be symmetric: max |{name} - {name}^T| = {asym:.3g} > tolerance {rtol * scale:.3g} "
             f"(rtol {rtol:g} times max |entry| {scale:.3g})"
         )
-
-
-def check_dynamics(dyn: Any, name: str = "dynamics") -> Any:
-    """A :class:`~formation_env.core.dynamics.LinearDynamics` (None is not accepted here)."""
-    from .dynamics import LinearDynamics
-
-    if not isinstance(dyn, LinearDynamics):
-        raise TypeError(f"{name} must be a LinearDynamics, got {_describe(dyn)}")
-    return dyn
-
-
-def check_framework(fw: Any, name: str = "fw") -> Any:
-    """A :class:`~formation_env.core.framework.Framework`."""
-    from .framework import Framework
-
-    if not isinstance(fw, Framework):
-        raise TypeError(f"{name} must be a Framework, got {_describe(fw)}")
-    return fw
 
 
 def check_kwargs_consumed(kwargs: dict[str, Any], where: str) -> None:

@@ -22,8 +22,11 @@ from numpy.typing import NDArray
 from .obstacles import nearest_vectors, ray_ranges
 
 if TYPE_CHECKING:
-    from .engine import Engine
     from .state import StepContext
+
+#: The engine a block reads its sizes and bounds from (``formation_env.env.engine.Engine``; typed loosely so that
+#: this module needs nothing of the engine's).
+Engine = Any
 
 __all__ = ["DEFAULT_OBSERVATION", "OBS_BLOCKS", "ObsBlock", "observation_table", "register_block"]
 

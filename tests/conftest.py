@@ -28,11 +28,6 @@ import scipy.linalg as sla
 from hypothesis import settings
 from hypothesis import strategies as st
 
-# Property tests draw the same examples on every run (a CI run is reproducible; a failure found by a random
-# search is then a test to add, not a flake): HYPOTHESIS_PROFILE=random searches afresh.
-settings.register_profile("repro", derandomize=True, print_blob=True)
-settings.register_profile("random", print_blob=True)
-settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repro"))
 
 try:  # the package is not installed in every checkout: import it from the repository
     import formation_env  # noqa: F401
@@ -40,6 +35,12 @@ except ImportError:  # pragma: no cover
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from formation_env.core import Framework
+
+# Property tests draw the same examples on every run (a CI run is reproducible; a failure found by a random
+# search is then a test to add, not a flake): HYPOTHESIS_PROFILE=random searches afresh.
+settings.register_profile("repro", derandomize=True, print_blob=True)
+settings.register_profile("random", print_blob=True)
+settings.load_profile(os.environ.get("HYPOTHESIS_PROFILE", "repro"))
 
 
 def crowded_followers() -> Framework:

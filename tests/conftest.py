@@ -28,7 +28,6 @@ import scipy.linalg as sla
 from hypothesis import settings
 from hypothesis import strategies as st
 
-
 try:  # the package is not installed in every checkout: import it from the repository
     import formation_env  # noqa: F401
 except ImportError:  # pragma: no cover

@@ -2,5 +2,5 @@
 
 Each module exposes ``TITLE``, ``run(quick: bool) -> list[dict]`` and
 ``markdown(rows) -> str``; the runner writes BENCHMARKS.md with machine and date.
-``python -m benchmarks.vec_profile`` is a profile of the batched step, run on its own.
+``python -m benchmarks.ppo_profile`` profiles where PPO's time goes with one env, run on its own.
 """

@@ -107,7 +107,7 @@ def write_report(out: Path, quick: bool = False) -> Path:
         )
     lines.append("")
     try:
-        from agents.report_section import evaluation_section  # learned vs analytic (issue 5)
+        from train.report_section import evaluation_section  # learned vs analytic
     except ImportError:
         lines.append("(learned-vs-analytic evaluation unavailable: the `agents` package is not installed)")
     else:

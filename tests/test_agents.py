@@ -134,7 +134,7 @@ def test_cli_evaluate_json(tmp_path, capsys) -> None:
 
 
 def test_report_section(tmp_path, monkeypatch) -> None:
-    import agents.report_section as rs
+    import train.report_section as rs
 
     monkeypatch.setitem(rs.STANDARD_SUITE, "quick_episodes", 3)
     lines = rs.evaluation_section(tmp_path, quick=True)

@@ -21,7 +21,7 @@ def evaluation_section(out: Path, quick: bool = False) -> list[str]:
 
     Writes CSV/JSON/markdown, histograms and GIFs under ``out / "evaluation"``; returns markdown lines.
     """
-    from train.evaluate import _fmt, evaluate, markdown_table, paired_difference, plot_episodes
+    from .evaluate import _fmt, evaluate, markdown_table, paired_difference, plot_episodes
 
     suite = STANDARD_SUITE
     n = suite["quick_episodes"] if quick else suite["episodes"]

@@ -72,3 +72,36 @@ def test_residual_policy_keeps_planner_performance(tmp_path: Path) -> None:
     assert isinstance(pol, LearnedPolicy) and pol.residual == 0.5
     res = evaluate(pol, "narrow_passage", 3, seed=0, generalisation=False)
     assert res["metrics"]["collision_rate"] == 0.0
+
+
+def test_tolerance_curriculum_shrinks_to_the_scenarios_test() -> None:
+    from formation_env.env.engine import Engine
+    from train.leaders import ToleranceCurriculum
+
+    eng = Engine("hold")
+    final = (eng.scenario.goal_tol, eng.scenario.formation_tol)
+    cur = ToleranceCurriculum(eng, factor=4.0, fraction=0.5, total=1000)
+    for t, scale in ((0, 4.0), (250, 2.5), (500, 1.0), (900, 1.0)):
+        cur.num_timesteps = t
+        cur._on_step()
+        assert eng.scenario.goal_tol == pytest.approx(final[0] * scale)
+        assert eng.scenario.formation_tol == pytest.approx(final[1] * scale)
+    cur._on_training_end()
+    assert (eng.scenario.goal_tol, eng.scenario.formation_tol) == final
+    with pytest.raises(ValueError, match="FACTOR"):
+        ToleranceCurriculum(eng, factor=0.5, fraction=0.5, total=10)
+
+
+def test_tolerance_reward_term_pays_while_the_success_test_holds() -> None:
+    import numpy as np
+
+    from formation_env.env.engine import Engine
+
+    eng = Engine("hold", reward_weights={"tolerance": 1.0, "progress": 0, "formation": 0, "effort": 0, "distance": 0})
+    s = eng.reset(np.random.default_rng(0), 1)
+    at_goal = s._replace(x=s.goal.copy() @ np.linalg.pinv(eng.dynamics.C).T, pos=s.goal.copy(), err=np.zeros(1))
+    zero = np.zeros((1, eng.n_l, eng.p))
+    _, _, r_goal, *_ = eng.step(at_goal, zero)
+    _, _, r_start, *_ = eng.step(s, zero)
+    np.testing.assert_allclose(r_goal, eng.dt)
+    np.testing.assert_allclose(r_start, 0.0)

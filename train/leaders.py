@@ -127,6 +127,32 @@ class CurveCallback(BaseCallback):
             self._ret, self._succ, self._time = [], [], []
 
 
+class ToleranceCurriculum(BaseCallback):
+    """A curriculum on the success test: the scenario's ``goal_tol`` and ``formation_tol`` start ``factor`` times
+    their values and shrink linearly to them over the first ``fraction`` of the training timesteps (commander
+    mode: the one engine of the ``FormationVecEnv``). Evaluation always uses the scenario's own test."""
+
+    def __init__(self, engine: Any, factor: float, fraction: float, total: int) -> None:
+        super().__init__()
+        if not (factor >= 1.0 and 0.0 < fraction <= 1.0):
+            raise ValueError(f"--curriculum needs FACTOR >= 1 and 0 < FRACTION <= 1, got {factor}, {fraction}")
+        self.scenario = engine.scenario
+        self.final = (self.scenario.goal_tol, self.scenario.formation_tol)
+        self.factor, self.span = float(factor), max(1, int(fraction * total))
+
+    def _scale(self) -> float:
+        left = max(0.0, 1.0 - self.num_timesteps / self.span)
+        return 1.0 + (self.factor - 1.0) * left
+
+    def _on_step(self) -> bool:
+        s = self._scale()
+        self.scenario.goal_tol, self.scenario.formation_tol = self.final[0] * s, self.final[1] * s
+        return True
+
+    def _on_training_end(self) -> None:
+        self.scenario.goal_tol, self.scenario.formation_tol = self.final
+
+
 def plot_curve(rows: Sequence[tuple[int, float, float, float]], path: Path, title: str) -> Path:
     """Training curve PNG: mean episode return, success rate and episode length (s) against timesteps.
 
@@ -171,6 +197,7 @@ def train(
     progress_bar: bool | None = None,
     eval_episodes: int | None = None,
     name: str | None = None,
+    curriculum: tuple[float, float] | None = None,
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -182,6 +209,8 @@ def train(
         env_kwargs: engine arguments, e.g. ``{"reward_weights": {"distance": 0.2}}``.
         progress_bar: SB3's progress bar (None: only on a TTY and not in smoke runs).
         eval_episodes: evaluation episodes after training (default 2 for smoke, 50 otherwise).
+        curriculum: (factor, fraction): the success test's tolerances start ``factor`` times the scenario's and
+            reach them after ``fraction`` of the timesteps (:class:`ToleranceCurriculum`; commander mode).
     """
     import torch
     from stable_baselines3 import PPO, SAC
@@ -244,7 +273,13 @@ def train(
     )
     if progress_bar is None:
         progress_bar = sys.stdout.isatty() and not smoke
-    model.learn(int(timesteps), callback=CallbackList([curve, ckpt]), progress_bar=progress_bar, tb_log_name=name)
+    callbacks: list[BaseCallback] = [curve, ckpt]
+    if curriculum is not None:
+        if mode != "commander":
+            raise ValueError("--curriculum is for commander mode (one engine) only")
+        callbacks.append(ToleranceCurriculum(raw.engine if hasattr(raw, "engine") else raw.venv.engine,
+                                             *curriculum, int(timesteps)))  # fmt: skip
+    model.learn(int(timesteps), callback=CallbackList(callbacks), progress_bar=progress_bar, tb_log_name=name)
     wall = time.time() - t0
     stem = out / name
     model.save(str(stem) + ".zip")
@@ -258,6 +293,7 @@ def train(
         "seed": int(seed),
         "n_envs": int(n_envs),
         "residual": float(residual),
+        "curriculum": None if curriculum is None else list(curriculum),
         "env_kwargs": env_kwargs,
         "observation": "global_state" if mode == "commander" else "leader_observation",
         "wall_time_s": round(wall, 1),
@@ -302,7 +338,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--env-kwargs", default="", help='JSON engine arguments, e.g. {"reward_weights": {"distance": 0.2}}')
     p.add_argument("--eval-episodes", type=int, default=None)
     p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
+    p.add_argument(
+        "--curriculum",
+        default="",
+        metavar="FACTOR:FRACTION",
+        help="success-test tolerances from FACTOR times the scenario's down to them over FRACTION of training",
+    )
     a = p.parse_args(argv)
+    curriculum = tuple(float(v) for v in a.curriculum.split(":")) if a.curriculum else None
+    if curriculum is not None and len(curriculum) != 2:
+        p.error(f"--curriculum must be FACTOR:FRACTION, got {a.curriculum!r}")
     cfg = train(
         a.algo,
         a.mode,
@@ -315,6 +360,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         residual=a.residual,
         env_kwargs=json.loads(a.env_kwargs) if a.env_kwargs else None,
         eval_episodes=a.eval_episodes,
+        curriculum=curriculum,  # type: ignore[arg-type]
     )
     print(json.dumps({k: cfg[k] for k in ("name", "wall_time_s", "eval")}, indent=2))
     return 0

@@ -82,6 +82,20 @@ def _success(ctx: StepContext) -> Array:
     return ctx.success.astype(np.float64)
 
 
+@reward_term(
+    "tolerance",
+    0.0,
+    "+T while the scenario's success test holds at this sample (every agent within "
+    "goal_tol of its goal, formation error below formation_tol, no collision), per second (s)",
+)
+def _tolerance(ctx: StepContext) -> Array:
+    st = ctx.state
+    delta = st.goal - st.pos
+    gd = np.sqrt(np.einsum("bnd,bnd->bn", delta, delta)).max(axis=1)
+    ok = ctx.engine.scenario.is_success(gd, st.err) & ~ctx.collision
+    return ctx.engine.dt * ok.astype(np.float64)
+
+
 #: Names of the registered terms, in order.
 REWARD_TERMS: tuple[str, ...] = tuple(TERMS)
 #: Default weights of the registered terms.

@@ -92,7 +92,7 @@ def test_geometry_kernels_match_the_oracle():
     caps2 = Capsules(rng.uniform(-2, 2, (B, m, 2)), rng.uniform(-1, 1, (B, m, 2)), rng.uniform(0, 0.4, (B, m)))
     u = obstacles.ray_directions(16)
     np.testing.assert_allclose(obstacles.ray_ranges(o, u, caps2, 3.0), ray_ranges(o, u, caps2, 3.0), atol=2e-3)
-    # threads give the same numbers as the serial kernel
+    # a row's numbers do not depend on the batch around it
     big = np.concatenate([o] * 64), Capsules(*(np.concatenate([f] * 64) for f in caps2))
     np.testing.assert_array_equal(obstacles.ray_ranges(*big[:1], u, big[1], 3.0)[:B],
                                   obstacles.ray_ranges(o, u, caps2, 3.0))  # fmt: skip

@@ -26,13 +26,11 @@ in metres.
 from __future__ import annotations
 
 import math
-import types
 from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
 import numba
 import numpy as np
-from numba import prange
 from numpy.typing import NDArray
 
 __all__ = [
@@ -54,17 +52,10 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
-#: Batches of at least this many environments run the geometry kernels on threads (numba's ``prange``).
-PARALLEL_FROM = 256
-
-
 def _jit(fn: Callable[..., Any]) -> Any:
-    """``fn`` compiled twice: serially (small batches, and the scalar helpers) and on threads (``prange``)."""
-    if fn.__name__.endswith("_rows"):  # the threaded twin under its own name, so that each has its own cache file
-        par = types.FunctionType(fn.__code__, fn.__globals__, fn.__name__ + "_threads")
-        par.__qualname__ = fn.__qualname__ + "_threads"
-        return (numba.njit(cache=True)(fn), numba.njit(cache=True, parallel=True)(par))
-    return numba.njit(cache=True, inline="always")(fn)
+    """``fn`` compiled by numba (cached on disk). The kernels run on one thread: on threads they contended with
+    numpy's BLAS threads for the same cores and made the batched step slower, not faster."""
+    return numba.njit(cache=True)(fn)
 
 
 class Capsules(NamedTuple):
@@ -245,14 +236,13 @@ def capsule_distance(p: Array, caps: Capsules) -> tuple[Array, Array]:
     return np.sqrt(np.einsum("bnmd,bnmd->bnm", diff, diff)) - caps.rad[:, None], diff
 
 
-# The kernels below run per environment (row b), under ``prange``: compiled twice, serially for small batches
-# (no thread start-up) and on threads for large ones. tests/oracle.py holds the plain numpy versions they are
-# tested against.
+# The kernels below loop over environments (row b), then over agents and capsules. tests/oracle.py holds the
+# plain numpy versions they are tested against.
 @_jit
 def _clearance_rows(p: Array, a: Array, e: Array, rad: Array, out: Array) -> None:  # pragma: no cover
     B, n, d = p.shape
     m = a.shape[1]
-    for b in prange(B):
+    for b in range(B):
         best = np.inf
         for j in range(m):
             ee = 0.0
@@ -279,7 +269,7 @@ def _path_rows(
     B, n, d = p0.shape
     m = a0.shape[1]
     tiny = 1e-300
-    for b in prange(B):
+    for b in range(B):
         best = np.inf
         for j in range(m):
             for i in range(n):
@@ -354,7 +344,7 @@ def _ray_rows(
     B, l, _ = o.shape
     R = u.shape[0]
     m = a.shape[1]
-    for b in prange(B):
+    for b in range(B):
         for i in range(l):
             ox, oy = o[b, i, 0], o[b, i, 1]
             for k in range(R):
@@ -385,7 +375,7 @@ def _ray_rows(
 @_jit
 def _pair_rows(p: Array, pi: NDArray[np.int64], pj: NDArray[np.int64], out: Array) -> None:  # pragma: no cover
     B, _, d = p.shape
-    for b in prange(B):
+    for b in range(B):
         best = np.inf
         for k in range(pi.shape[0]):
             dd = 0.0
@@ -396,22 +386,17 @@ def _pair_rows(p: Array, pi: NDArray[np.int64], pj: NDArray[np.int64], out: Arra
         out[b] = math.sqrt(best)
 
 
-def _rows(kernel: Any, B: int) -> Any:
-    """The kernel compiled for B rows: on threads from ``PARALLEL_FROM`` rows."""
-    return kernel[1] if B >= PARALLEL_FROM else kernel[0]
-
-
 def pair_clearance(p: Array, pi: NDArray[np.int64], pj: NDArray[np.int64]) -> Array:
     """Smallest centre distance (m) of the agent pairs (pi[k], pj[k]) in each environment, p (B, n, d) -> (B,)."""
     out = np.empty(p.shape[0])
-    _rows(_pair_rows, p.shape[0])(p, pi, pj, out)
+    _pair_rows(p, pi, pj, out)
     return out
 
 
 def clearance(p: Array, caps: Capsules) -> Array:
     """Smallest distance (m) from any point p (B, n, d) to any capsule's surface, (B,) (inf without capsules)."""
     out = np.empty(p.shape[0])
-    _rows(_clearance_rows, p.shape[0])(p, caps.a, caps.e, caps.rad, out)
+    _clearance_rows(p, caps.a, caps.e, caps.rad, out)
     return out
 
 
@@ -421,7 +406,7 @@ def path_clearance(p0: Array, p1: Array, caps0: Capsules, caps1: Capsules) -> Ar
     agent's path relative to it runs from p0 to p1 - (a1 - a0) (segment-segment closest points, Ericson,
     Real-Time Collision Detection, 5.1.9)."""
     out = np.empty(p0.shape[0])
-    _rows(_path_rows, p0.shape[0])(p0, p1, caps0.a, caps1.a, caps0.e, caps0.rad, out)
+    _path_rows(p0, p1, caps0.a, caps1.a, caps0.e, caps0.rad, out)
     return out
 
 
@@ -429,7 +414,7 @@ def ray_ranges(o: Array, u: Array, caps: Capsules, max_range: float) -> Array:
     """Range (m) along each 2D ray u (R, 2) from each origin o (B, l, 2) to the first capsule surface, at most
     ``max_range``; a ray starting inside a capsule reads 0. Shape (B, l, R)."""
     out = np.empty((o.shape[0], o.shape[1], u.shape[0]))
-    _rows(_ray_rows, o.shape[0])(np.ascontiguousarray(o), u, caps.a, caps.e, caps.rad, float(max_range), out)
+    _ray_rows(np.ascontiguousarray(o), u, caps.a, caps.e, caps.rad, float(max_range), out)
     return out
 
 

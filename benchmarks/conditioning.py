@@ -52,7 +52,8 @@ def main(argv: list[str]) -> None:
     )
     print("Command: `python -m benchmarks.conditioning`\n")
     print(
-        "| n | leaders k | cond(Omega_ff) | T_opt (s) | samples to 1e-6 at T_opt | max degree | build + design + check (s) |"
+        "| n | leaders k | cond(Omega_ff) | T_opt (s) | samples to 1e-6 at T_opt | max degree "
+        "| build + design + check (s) |"
     )
     print("|---:|---:|---:|---:|---:|---:|---:|")
     for n in sizes:

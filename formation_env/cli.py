@@ -121,7 +121,8 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--env-kwargs", default="", help='JSON dict of env arguments, e.g. {"dt": 0.05}')
     p.add_argument("--out", default="out/rollout.gif", help="output .gif or .mp4")
     p.set_defaults(func=cmd_rollout)
-    p = sub.add_parser("evaluate", **fmt, help="evaluate a policy on a seeded suite (success, collisions, time to goal)")
+    what = "evaluate a policy on a seeded suite (success, collisions, time to goal)"
+    p = sub.add_parser("evaluate", **fmt, help=what)
     from train.evaluate import add_arguments
 
     add_arguments(p)

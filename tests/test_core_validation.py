@@ -100,16 +100,16 @@ def test_printed_omega_passes_at_its_tolerance():
 # ------------------------------------------------------------------ indices, None, strings, complex
 @pytest.mark.parametrize("bad", [(0.7, 3.9), [0.0, 1.0, 2.0], np.array([0.5, 1, 2])])
 def test_float_leader_indices_refused_not_truncated(bad):
-    with pytest.raises(FormationError, match="leaders.*integer agent indices.*not truncated"):
+    with pytest.raises(FormationError, match=r"leaders.*integer agent indices.*not truncated"):
         Partition(paper_omega(), bad)
     with pytest.raises(FormationError, match="leaders"):
         Framework(X0, paper_example().edges, bad)
 
 
 def test_float_edges_refused():
-    with pytest.raises(FormationError, match="edges.*integer"):
+    with pytest.raises(FormationError, match=r"edges.*integer"):
         Framework(X0, [(0.7, 3.9), (0, 1)], LEADERS)
-    with pytest.raises(FormationError, match="edges.*integer"):
+    with pytest.raises(FormationError, match=r"edges.*integer"):
         stress_from_weights(5, [(0.7, 3.9)], [1.0])
 
 
@@ -164,7 +164,7 @@ def test_dlqr_needs_r_and_spd_weights():
         dlqr(a, b, np.eye(2), None)
     with pytest.raises(FormationError, match="R must be symmetric positive definite"):
         dlqr(a, b, np.eye(2), -np.eye(2))
-    k, _, e = dlqr(a, b, np.eye(2), np.eye(2))
+    _, _, e = dlqr(a, b, np.eye(2), np.eye(2))
     assert np.all(np.abs(e) < 1)
 
 

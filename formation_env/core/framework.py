@@ -110,8 +110,8 @@ class Framework:
             raise FrameworkError(f"positions must have at least one coordinate (d >= 1), got shape {r.shape}")
         if n < d + 2:
             raise FrameworkError(
-                f"positions must have at least d + 2 = {d + 2} agents (rows): a framework in R^{d} needs d + 1 leaders and a "
-                f"follower, got {n}"
+                f"positions must have at least d + 2 = {d + 2} agents (rows): a framework in R^{d} needs d + 1 "
+                f"leaders and a follower, got {n}"
             )
         if not isinstance(name, str):
             raise TypeError(f"name must be a string, got {type(name).__name__}")

@@ -64,7 +64,7 @@ class _PathStates:
         self.dyn, self.n_l, self.dt = dyn, n_l, dt
         c = dyn.C
         self.c_pinv = np.linalg.pinv(c)  # (q, d)
-        u, s, vt = np.linalg.svd(c)
+        _, s, vt = np.linalg.svd(c)
         rank = int(np.sum(s > 1e-12 * max(s[0], 1.0)))
         self.null = vt[rank:].T  # (q, q - rank)
         ca = c @ dyn.A
@@ -235,7 +235,7 @@ def simulate(
     path = _PathStates(dyn, n_l, dt) if leader_path is not None else None
     prev_pos = None
     if path is not None:
-        xl0, is_pos = path(leader_path(0), 0, None)
+        xl0, _ = path(leader_path(0), 0, None)
         states[0, part.leaders] = xl0
         prev_pos = dyn.position(xl0)
     worst_res, worst_k, scale, u_max = 0.0, -1, 1.0, 0.0

@@ -447,8 +447,8 @@ def check_partition(part: Partition, rtol: float = DEFAULT_RTOL, name: str = "om
             raise StressMatrixError(f"{name}: Omega_ff is not positive definite ({exc})") from exc
         if neg or zero:
             raise StressMatrixError(
-                f"{name}: Omega_ff is not positive definite (it must be): {neg} negative and {zero} zero pivot(s) in its "
-                "LDL^T factorisation (the followers are not affinely localisable from these leaders)"
+                f"{name}: Omega_ff is not positive definite (it must be): {neg} negative and {zero} zero pivot(s) "
+                "in its LDL^T factorisation (the followers are not affinely localisable from these leaders)"
             )
         return
     eff = np.linalg.eigvalsh(part.omega_ff_dense)

@@ -52,6 +52,7 @@ __all__ = [
 
 Array = NDArray[np.float64]
 
+
 def _jit(fn: Callable[..., Any]) -> Any:
     """``fn`` compiled by numba (cached on disk). The kernels run on one thread: on threads they contended with
     numpy's BLAS threads for the same cores and made the batched step slower, not faster."""

@@ -64,7 +64,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import NDArray
 
-from formation_env.env.scenarios._base import affine_batch
+from formation_env.env.scenarios._base import affine_batch, rotation_2d
 
 if TYPE_CHECKING:
     from formation_env.env.engine import Engine, EngineState
@@ -282,9 +282,7 @@ def _pose_between(t0: Array, t1: Array, a: Array) -> Array:
     rel = u1 @ np.swapaxes(u0, 1, 2)  # the rotation from U0 to U1
     d = t0.shape[-1]
     if d == 2:
-        ang = np.arctan2(rel[:, 1, 0], rel[:, 0, 0]) * a
-        c, s = np.cos(ang), np.sin(ang)
-        step = np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+        step = rotation_2d(np.arctan2(rel[:, 1, 0], rel[:, 0, 0]) * a)
     else:
         from scipy.spatial.transform import Rotation
 

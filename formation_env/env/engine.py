@@ -389,7 +389,7 @@ class Engine:
         caps = self.capsules(state.params, state.k)
         clear = np.full(B, np.inf)
         acts = np.zeros((B, self.n_l, self.p))
-        return StepContext(self, state, None, acts, theta, b, clear, false, false, false, caps, rng)
+        return StepContext(self, state, None, acts, theta, b, clear, false, false, false, false, caps, rng)
 
     # ------------------------------------------------------------------ the API
     def observe(
@@ -447,20 +447,21 @@ class Engine:
         gd = np.sqrt(np.einsum("bnd,bnd->bn", delta, delta))
         theta, b, err = self._fit(pos)
         sc = self.scenario
-        ok = sc.is_success(gd.max(axis=1), err) & ~collision
+        gd_max = gd.max(axis=1)
+        ok = sc.is_success(gd_max, err) & ~collision
         streak = (state.streak + 1) * ok
         success = streak >= sc.hold_steps
         terminated = collision | success if sc.terminate_on_success else collision
         truncated = (k >= self.max_cycles) & ~terminated
         new = EngineState(x1, pos, vel, mem1, k, goal, goal_vel, gd[:, self.leaders], err, streak, params)
-        ctx = StepContext(self, new, state, a, theta, b, clear, collision, oob, success, caps, rng)
+        ctx = StepContext(self, new, state, a, theta, b, clear, collision, oob, ok, success, caps, rng)
         info = {
             "success": success,
             "collision": collision,
             "out_of_bounds": oob,
             "formation_error": err,
             "min_clearance": clear,
-            "goal_distance": gd.max(axis=1),
+            "goal_distance": gd_max,
             "time": k * self.dt,
             "control_effort": np.einsum("blp,blp->bl", u, u),
         }

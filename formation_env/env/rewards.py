@@ -89,11 +89,7 @@ def _success(ctx: StepContext) -> Array:
     "goal_tol of its goal, formation error below formation_tol, no collision), per second (s)",
 )
 def _tolerance(ctx: StepContext) -> Array:
-    st = ctx.state
-    delta = st.goal - st.pos
-    gd = np.sqrt(np.einsum("bnd,bnd->bn", delta, delta)).max(axis=1)
-    ok = ctx.engine.scenario.is_success(gd, st.err) & ~ctx.collision
-    return ctx.engine.dt * ok.astype(np.float64)
+    return ctx.engine.dt * ctx.at_goal.astype(np.float64)
 
 
 #: Names of the registered terms, in order.

@@ -62,7 +62,8 @@ class StepContext(NamedTuple):
     ``state`` is the new state (for a reset, the first one) and ``prev`` the one before (None at reset);
     ``actions`` the clipped leader actions (B, n_l, p) in [-1, 1] (zeros at reset). ``theta`` (B, d, d) and
     ``b`` (B, d) are the least-squares affine fit of all agents (m); ``clearance`` (B,) the smallest gap
-    between surfaces (m); ``collision``, ``out_of_bounds``, ``success`` (B,) bool; ``capsules`` the obstacles
+    between surfaces (m); ``collision``, ``out_of_bounds``, ``success`` (B,) bool; ``at_goal`` (B,) bool: the
+    scenario's success test holds at this sample and nothing collided (``success`` needs ``hold_steps`` of them); ``capsules`` the obstacles
     at this time; ``rng`` the generator of observation noise (one, or one per environment; None: no noise).
     """
 
@@ -75,6 +76,7 @@ class StepContext(NamedTuple):
     clearance: Array
     collision: NDArray[np.bool_]
     out_of_bounds: NDArray[np.bool_]
+    at_goal: NDArray[np.bool_]
     success: NDArray[np.bool_]
     capsules: Capsules
     rng: np.random.Generator | Sequence[np.random.Generator] | None

@@ -63,8 +63,9 @@ class StepContext(NamedTuple):
     ``actions`` the clipped leader actions (B, n_l, p) in [-1, 1] (zeros at reset). ``theta`` (B, d, d) and
     ``b`` (B, d) are the least-squares affine fit of all agents (m); ``clearance`` (B,) the smallest gap
     between surfaces (m); ``collision``, ``out_of_bounds``, ``success`` (B,) bool; ``at_goal`` (B,) bool: the
-    scenario's success test holds at this sample and nothing collided (``success`` needs ``hold_steps`` of them); ``capsules`` the obstacles
-    at this time; ``rng`` the generator of observation noise (one, or one per environment; None: no noise).
+    scenario's success test holds at this sample and nothing collided (``success`` needs ``hold_steps`` of
+    them); ``capsules`` the obstacles at this time; ``rng`` the generator of observation noise (one, or one
+    per environment; None: no noise).
     """
 
     engine: Any

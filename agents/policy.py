@@ -29,7 +29,7 @@ from formation_env.env.engine import Engine, EngineState
 
 from .planner import make_planner
 
-__all__ = ["AnalyticPolicy", "LearnedPolicy", "Policy", "load_policy"]
+__all__ = ["AnalyticPolicy", "LearnedPolicy", "Policy", "RandomPolicy", "load_policy"]
 
 Array = NDArray[np.float64]
 
@@ -120,6 +120,25 @@ class AnalyticPolicy(Policy):
         return a.reshape(a.shape[0], -1).astype(np.float32)
 
 
+class RandomPolicy(Policy):
+    """Uniform random actions in [-1, 1] from its own generator (seeded: the same seed, the same actions).
+
+    The floor every learned policy must beat. Args: engine (or a formation_v0 env), seed.
+    """
+
+    def __init__(self, engine: Engine | Any, seed: int = 0) -> None:
+        self.engine = _engine_of(engine)
+        self.rng = np.random.default_rng(seed)
+        self.name = "random"
+
+    def act_engine(self, engine: Engine, state: EngineState, obs: Any = None) -> Array:
+        return self.rng.uniform(-1.0, 1.0, (state.batch_size, engine.n_l, engine.p))
+
+    def act(self, observation: NDArray[np.floating]) -> NDArray[np.float32]:
+        B = np.atleast_2d(np.asarray(observation)).shape[0]
+        return self.rng.uniform(-1.0, 1.0, (B, self.engine.n_l * self.engine.p)).astype(np.float32)
+
+
 class LearnedPolicy(Policy):
     """A saved SB3 model with its VecNormalize statistics and config (``<stem>.zip``,
     ``<stem>_vecnormalize.pkl``, ``<stem>_config.json`` side by side).
@@ -208,7 +227,8 @@ class LearnedPolicy(Policy):
 
 
 def load_policy(spec: str | Path | Policy, env: Engine | Any) -> Policy:
-    """``"analytic"`` -> :class:`AnalyticPolicy`; a path -> :class:`LearnedPolicy`; a Policy is returned as is.
+    """``"analytic"`` -> :class:`AnalyticPolicy`; ``"random"`` -> :class:`RandomPolicy` (seed 0); a path ->
+    :class:`LearnedPolicy`; a Policy is returned as is.
 
     ``env``: an :class:`Engine` or a formation_v0 env (the policy acts in its engine).
     """
@@ -216,4 +236,6 @@ def load_policy(spec: str | Path | Policy, env: Engine | Any) -> Policy:
         return spec
     if str(spec) == "analytic":
         return AnalyticPolicy(env)
+    if str(spec) == "random":
+        return RandomPolicy(env)
     return LearnedPolicy.load(spec, env)

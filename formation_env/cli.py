@@ -98,6 +98,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return run_cli(args)
 
 
+def cmd_leaderboard(args: argparse.Namespace) -> int:
+    """Every entry (random, analytic, learned) on every scenario's seeded suite; writes docs/leaderboard.md."""
+    from train.leaderboard import run_cli
+
+    return run_cli(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="formation-env", description=__doc__)
     parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
@@ -127,6 +134,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_arguments(p)
     p.set_defaults(func=cmd_evaluate)
+    p = sub.add_parser("leaderboard", **fmt, help="every policy on every scenario's suite (docs/leaderboard.md)")
+    from train.leaderboard import add_arguments as leaderboard_arguments
+
+    leaderboard_arguments(p)
+    p.set_defaults(func=cmd_leaderboard)
     p = sub.add_parser("bench", **fmt, help="run the benchmarks and write BENCHMARKS.md")
     p.add_argument("--only", nargs="*", help="sections (core, design, env)")
     p.add_argument("--quick", action="store_true")

@@ -6,8 +6,9 @@ engine (one ``step`` for the whole suite); a policy acts on the batch through
 :meth:`agents.policy.Policy.act_engine` (analytic planners read the engine state, learned commander
 policies the commander observation), so the harness never cares which it runs.
 
-Metrics (per episode, then aggregated with 95 % confidence intervals: Wilson for rates, Student t
-for means):
+Metrics (per episode, then means over the suite with 95 % confidence intervals: Wilson for rates, from
+``scipy.stats.binomtest``, Student t for means; the worst episode's values are reported apart, under
+``"worst"``):
 
 ==================  ==========================================================================
 key                 meaning
@@ -16,7 +17,7 @@ success_rate        the scenario's success (goal pose reached, formation error b
 collision_rate      any contact (agent-agent, wall, circle, world box) during the episode
 time_to_goal        s, first success, over successful episodes
 mean_formation_err  m, affine-image formation error averaged over the episode's samples
-max_formation_err   m, largest formation error of the episode
+max_formation_err   m, largest formation error of the episode from its first action on
 min_clearance       m, smallest clearance to obstacles/agents (negative: contact)
 control_effort      sum over samples and leaders of |u|^2 dt  (u in m/s^2 for double integrators)
 ==================  ==========================================================================
@@ -64,15 +65,14 @@ GAP_SUITES: dict[str, tuple[float, float]] = {
 }
 
 
-def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
-    """Wilson score interval of a rate k / n."""
+def wilson(k: int, n: int, confidence: float = 0.95) -> tuple[float, float]:
+    """Wilson score interval of a rate k / n (``scipy.stats.binomtest(k, n).proportion_ci``)."""
+    from scipy import stats
+
     if n == 0:
         return (float("nan"), float("nan"))
-    p = k / n
-    den = 1 + z * z / n
-    c = (p + z * z / (2 * n)) / den
-    h = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
-    return (max(0.0, c - h), min(1.0, c + h))
+    ci = stats.binomtest(int(k), int(n)).proportion_ci(confidence_level=confidence, method="wilson")
+    return (float(ci.low), float(ci.high))
 
 
 def mean_ci(x: Array) -> tuple[float, float, float]:
@@ -103,8 +103,14 @@ def paired_difference(
     return m, lo, hi, int(np.isfinite(diff).sum())
 
 
-def summarise(res: dict[str, Any]) -> tuple[dict[str, float], dict[str, list[float]]]:
-    """Metrics (the contract keys) and their 95 % intervals from ``run_batch`` results."""
+def summarise(res: dict[str, Any]) -> tuple[dict[str, float], dict[str, list[float]], dict[str, float]]:
+    """Metrics (the contract keys, means over episodes), their 95 % intervals, and the worst episodes' values.
+
+    Every metric is a mean over the suite's episodes (``time_to_goal`` over successful ones) with its
+    interval; ``max_formation_err`` is the mean of each episode's largest error and ``min_clearance`` the mean
+    of each episode's smallest clearance. The worst episode is reported on its own (``worst``): the largest
+    ``max_formation_err``, the smallest ``min_clearance`` and the longest ``time_to_goal``.
+    """
     n = int(res["success"].size)
     metrics: dict[str, float] = {}
     cis: dict[str, list[float]] = {}
@@ -112,14 +118,16 @@ def summarise(res: dict[str, Any]) -> tuple[dict[str, float], dict[str, list[flo
         k = int(res[src].sum())
         metrics[key] = k / n
         cis[key] = list(wilson(k, n))
-    for key in ("time_to_goal", "mean_formation_err", "control_effort"):
+    for key in ("time_to_goal", "mean_formation_err", "max_formation_err", "min_clearance", "control_effort"):
         m, lo, hi = mean_ci(res[key])
         metrics[key], cis[key] = m, [lo, hi]
-    m, lo, hi = mean_ci(res["max_formation_err"])
-    metrics["max_formation_err"], cis["max_formation_err"] = float(np.max(res["max_formation_err"])), [lo, hi]
-    m, lo, hi = mean_ci(res["min_clearance"])
-    metrics["min_clearance"], cis["min_clearance"] = float(np.min(res["min_clearance"])), [lo, hi]
-    return metrics, cis
+    ttg = np.asarray(res["time_to_goal"], dtype=np.float64)
+    worst = {
+        "max_formation_err": float(np.max(res["max_formation_err"])),
+        "min_clearance": float(np.min(res["min_clearance"])),
+        "time_to_goal": float(np.max(ttg[np.isfinite(ttg)])) if np.isfinite(ttg).any() else float("nan"),
+    }
+    return metrics, cis, worst
 
 
 def make_engine(scenario: str, env_kwargs: dict[str, Any] | None = None) -> Engine:
@@ -150,12 +158,12 @@ def evaluate(
     """Evaluate a policy on the seeded suite ``seed .. seed + episodes - 1`` of ``scenario``.
 
     Args:
-        policy_spec: ``"analytic"``, a path to a saved model (.zip), or a :class:`agents.policy.Policy`.
+        policy_spec: ``"analytic"``, ``"random"``, a path to a saved model (.zip), or a :class:`agents.policy.Policy`.
         env_kwargs: engine arguments (scenario keyword arguments included).
         out: folder for ``episodes.csv``, ``metrics.json``, ``metrics.md``, plots and a GIF (None: nothing written).
         generalisation: for ``narrow_passage``, also evaluate gap widths outside the training range.
     Returns:
-        ``{"metrics": {METRIC_KEYS...}, "ci95": {...}, "episodes": n, "seeds": [...], "policy": name,
+        ``{"metrics": {METRIC_KEYS...}, "ci95": {...}, "worst": {...}, "episodes": n, "seeds": [...], "policy": name,
         "scenario": ..., "per_episode": {...}, "generalisation": {suite: metrics}}``.
     """
     from agents.policy import load_policy
@@ -164,10 +172,11 @@ def evaluate(
     policy = load_policy(policy_spec, engine) if isinstance(policy_spec, (str, Path)) else policy_spec
     seeds = list(range(int(seed), int(seed) + int(episodes)))
     res = run_batch(engine, policy.act_engine, seeds)
-    metrics, cis = summarise(res)
+    metrics, cis, worst = summarise(res)
     result: dict[str, Any] = {
         "metrics": metrics,
         "ci95": cis,
+        "worst": worst,
         "episodes": len(seeds),
         "seeds": [seeds[0], seeds[-1]],
         "policy": policy.name,
@@ -203,14 +212,16 @@ def _fmt(v: float) -> str:
 
 
 def markdown_table(results: Sequence[dict[str, Any]]) -> list[str]:
-    """A markdown table of metrics with 95 % intervals, one row per result."""
-    head = "| policy | " + " | ".join(METRIC_KEYS) + " |"
-    lines = [head, "|" + "---|" * (len(METRIC_KEYS) + 1)]
+    """A markdown table of metrics (means with 95 % intervals) and the worst episode's values, a row per result."""
+    head = "| policy | " + " | ".join(METRIC_KEYS) + " | worst episode |"
+    lines = [head, "|" + "---|" * (len(METRIC_KEYS) + 2)]
     for r in results:
         cells = []
         for k in METRIC_KEYS:
             lo, hi = r["ci95"][k]
             cells.append(f"{_fmt(r['metrics'][k])} [{_fmt(lo)}, {_fmt(hi)}]")
+        w = r.get("worst", {})
+        cells.append(", ".join(f"{k} {_fmt(v)}" for k, v in w.items()))
         lines.append(f"| {r['policy']} | " + " | ".join(cells) + " |")
     return lines
 
@@ -298,7 +309,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The evaluation options (shared by ``python -m train.evaluate`` and ``formation-env evaluate``)."""
     from formation_env.env.scenarios import REGISTRY
 
-    p.add_argument("--policy", default="analytic", help="analytic, or a saved model's .zip path")
+    p.add_argument("--policy", default="analytic", help="analytic, random, or a saved model's .zip path")
     p.add_argument("--scenario", default="narrow_passage", choices=sorted(REGISTRY))
     p.add_argument("--episodes", type=int, default=100, help="episodes of the suite")
     p.add_argument("--seed", type=int, default=0, help="first episode seed of the suite")
@@ -312,7 +323,12 @@ def run_cli(args: argparse.Namespace) -> int:
     kw = json.loads(args.env_kwargs) if getattr(args, "env_kwargs", "") else None
     res = evaluate(args.policy, args.scenario, args.episodes, args.seed, env_kwargs=kw, out=args.out)
     if args.json:
-        blob = {"metrics": res["metrics"], "ci95": res["ci95"], "generalisation": res.get("generalisation")}
+        blob = {
+            "metrics": res["metrics"],
+            "ci95": res["ci95"],
+            "worst": res["worst"],
+            "generalisation": res.get("generalisation"),
+        }
         print(json.dumps(_finite(blob)))
     else:
         print("\n".join(markdown_table([res])))

@@ -42,11 +42,65 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor, VecNormalize
 
-__all__ = ["TRAIN_SEED_OFFSET", "ResidualVecEnv", "main", "make_venv", "train"]
+__all__ = [
+    "ALGO_DEFAULTS",
+    "POLICY_DEFAULTS",
+    "TRAIN_SEED_OFFSET",
+    "ResidualVecEnv",
+    "load_config",
+    "main",
+    "make_venv",
+    "train",
+]
 
 #: Training episodes come from generators seeded TRAIN_SEED_OFFSET + seed + copy, disjoint from the
 #: evaluation suite's episode seeds (0..999) and the planner's tuning seeds (10_000..).
 TRAIN_SEED_OFFSET = 1_000_000
+
+
+#: Hyperparameters of each algorithm unless a recipe (``train/configs/*.yaml``) or a flag sets them.
+ALGO_DEFAULTS: dict[str, dict[str, Any]] = {
+    "ppo": {
+        "n_steps": 256,
+        "batch_size": 256,
+        "n_epochs": 5,
+        "learning_rate": 3e-4,
+        "gamma": 0.99,
+        "gae_lambda": 0.95,
+        "ent_coef": 0.0,
+    },
+    "sac": {"buffer_size": 100_000, "learning_starts": 2_000, "batch_size": 256, "train_freq": 1, "gradient_steps": 1},
+}
+#: SB3 ``policy_kwargs`` of each algorithm unless a recipe sets them.
+POLICY_DEFAULTS: dict[str, dict[str, Any]] = {"ppo": {"net_arch": [64, 64]}, "sac": {"net_arch": [64, 64]}}
+#: What ``--smoke`` shrinks.
+SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
+    "ppo": {"n_steps": 16, "n_epochs": 2},
+    "sac": {"learning_starts": 64, "batch_size": 64},
+}
+#: The keys a recipe file may hold (the rest is refused, naming the key).
+CONFIG_KEYS = (
+    "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
+    "curriculum", "algo_kwargs", "policy_kwargs",
+)  # fmt: skip
+
+
+def load_config(path: str | Path) -> dict[str, Any]:
+    """A training recipe (YAML) as a dict of :func:`train` arguments; unknown keys raise ValueError."""
+    import yaml
+
+    p = Path(path)
+    if not p.exists():
+        raise FileNotFoundError(f"--config: no recipe file at {p}")
+    cfg = yaml.safe_load(p.read_text()) or {}
+    if not isinstance(cfg, dict):
+        raise ValueError(f"--config: {p} must hold a mapping of training arguments, got {type(cfg).__name__}")
+    unknown = sorted(set(cfg) - set(CONFIG_KEYS))
+    if unknown:
+        raise ValueError(f"--config: {p} has unknown keys {unknown}; allowed: {list(CONFIG_KEYS)}")
+    if "curriculum" in cfg and cfg["curriculum"] is not None:
+        cfg["curriculum"] = tuple(float(v) for v in cfg["curriculum"])
+    return cfg
 
 
 class ResidualVecEnv(VecEnvWrapper):
@@ -198,6 +252,9 @@ def train(
     eval_episodes: int | None = None,
     name: str | None = None,
     curriculum: tuple[float, float] | None = None,
+    algo_kwargs: dict[str, Any] | None = None,
+    policy_kwargs: dict[str, Any] | None = None,
+    config_file: str | None = None,
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -211,6 +268,9 @@ def train(
         eval_episodes: evaluation episodes after training (default 2 for smoke, 50 otherwise).
         curriculum: (factor, fraction): the success test's tolerances start ``factor`` times the scenario's and
             reach them after ``fraction`` of the timesteps (:class:`ToleranceCurriculum`; commander mode).
+        algo_kwargs: the algorithm's hyperparameters over :data:`ALGO_DEFAULTS` (e.g. ``n_steps``, ``gamma``).
+        policy_kwargs: SB3 ``policy_kwargs`` over :data:`POLICY_DEFAULTS` (e.g. ``net_arch``, ``log_std_init``).
+        config_file: the recipe file these came from (recorded in the saved config).
     """
     import torch
     from stable_baselines3 import PPO, SAC
@@ -226,44 +286,27 @@ def train(
     t0 = time.time()
     raw = make_venv(mode, scenario, n_envs, TRAIN_SEED_OFFSET + seed, env_kwargs, residual)
     venv = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
-    policy_kwargs: dict[str, Any] = {"net_arch": [64, 64]}
-    if algo == "ppo":
-        if residual > 0:
-            policy_kwargs["log_std_init"] = -1.0
-        n_steps = 16 if smoke else 256
-        model: Any = PPO(
-            "MlpPolicy",
-            venv,
-            n_steps=n_steps,
-            batch_size=min(256, n_steps * venv.num_envs),
-            n_epochs=2 if smoke else 5,
-            learning_rate=3e-4,
-            gamma=0.99,
-            gae_lambda=0.95,
-            ent_coef=0.0,
-            policy_kwargs=policy_kwargs,
-            seed=seed,
-            device="cpu",
-            tensorboard_log=str(out / "tb"),
-            verbose=0,
-        )
-    elif algo == "sac":
-        model = SAC(
-            "MlpPolicy",
-            venv,
-            buffer_size=100_000,
-            learning_starts=64 if smoke else 2_000,
-            batch_size=64 if smoke else 256,
-            train_freq=1,
-            gradient_steps=1,
-            policy_kwargs=policy_kwargs,
-            seed=seed,
-            device="cpu",
-            tensorboard_log=str(out / "tb"),
-            verbose=0,
-        )
-    else:
+    pk: dict[str, Any] = {**POLICY_DEFAULTS.get(algo, {}), **(policy_kwargs or {})}
+    if algo == "ppo" and residual > 0:
+        pk.setdefault("log_std_init", -1.0)
+    if algo not in ALGO_DEFAULTS:
         raise ValueError(f"algo must be 'ppo' or 'sac', got {algo!r}")
+    hp: dict[str, Any] = {**ALGO_DEFAULTS[algo], **(algo_kwargs or {})}
+    if smoke:
+        hp.update(SMOKE_OVERRIDES[algo])
+    if algo == "ppo":
+        hp["batch_size"] = min(int(hp["batch_size"]), int(hp["n_steps"]) * venv.num_envs)
+    cls = PPO if algo == "ppo" else SAC
+    model: Any = cls(
+        "MlpPolicy",
+        venv,
+        policy_kwargs=pk,
+        seed=seed,
+        device="cpu",
+        tensorboard_log=str(out / "tb"),
+        verbose=0,
+        **hp,
+    )
     curve = CurveCallback()
     ckpt = CheckpointCallback(
         save_freq=max(int(timesteps) // (4 * venv.num_envs), 1),
@@ -298,7 +341,9 @@ def train(
         "observation": "global_state" if mode == "commander" else "leader_observation",
         "wall_time_s": round(wall, 1),
         "command": "python -m train.leaders " + " ".join(sys.argv[1:]) if sys.argv[0].endswith("leaders.py") else "",
-        "sb3_policy_kwargs": {k: v for k, v in policy_kwargs.items()},
+        "algo_kwargs": hp,
+        "sb3_policy_kwargs": pk,
+        "config_file": config_file,
     }
     (out / f"{name}_config.json").write_text(json.dumps(config, indent=2))
     with open(out / "curve.csv", "w", newline="") as fh:
@@ -327,15 +372,17 @@ def train(
 
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m train.leaders", description=__doc__.splitlines()[0])
-    p.add_argument("--algo", choices=["ppo", "sac"], default="ppo")
-    p.add_argument("--mode", choices=["commander", "shared"], default="commander")
-    p.add_argument("--scenario", default="narrow_passage")
-    p.add_argument("--timesteps", type=int, default=100_000)
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--config", default=None, help="a training recipe (YAML, train/configs/); flags override it")
+    p.add_argument("--algo", choices=["ppo", "sac"], default=None, help="default ppo")
+    p.add_argument("--mode", choices=["commander", "shared"], default=None, help="default commander")
+    p.add_argument("--scenario", default=None, help="default narrow_passage")
+    p.add_argument("--timesteps", type=int, default=None, help="default 100000")
+    p.add_argument("--seed", type=int, default=None, help="default 0")
     p.add_argument("--out", default="runs/leaders")
-    p.add_argument("--n-envs", type=int, default=16)
-    p.add_argument("--residual", type=float, default=0.0, help="learn a correction of this scale on the planner")
+    p.add_argument("--n-envs", type=int, default=None, help="default 16")
+    p.add_argument("--residual", type=float, default=None, help="learn a correction of this scale on the planner")
     p.add_argument("--env-kwargs", default="", help='JSON engine arguments, e.g. {"reward_weights": {"distance": 0.2}}')
+    p.add_argument("--algo-kwargs", default="", help='JSON hyperparameters over the recipe\'s, e.g. {"gamma": 0.995}')
     p.add_argument("--eval-episodes", type=int, default=None)
     p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
     p.add_argument(
@@ -345,24 +392,24 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="success-test tolerances from FACTOR times the scenario's down to them over FRACTION of training",
     )
     a = p.parse_args(argv)
-    curriculum = tuple(float(v) for v in a.curriculum.split(":")) if a.curriculum else None
-    if curriculum is not None and len(curriculum) != 2:
-        p.error(f"--curriculum must be FACTOR:FRACTION, got {a.curriculum!r}")
-    cfg = train(
-        a.algo,
-        a.mode,
-        a.scenario,
-        a.timesteps,
-        a.seed,
-        a.out,
-        smoke=a.smoke,
-        n_envs=a.n_envs,
-        residual=a.residual,
-        env_kwargs=json.loads(a.env_kwargs) if a.env_kwargs else None,
-        eval_episodes=a.eval_episodes,
-        curriculum=curriculum,  # type: ignore[arg-type]
-    )
-    print(json.dumps({k: cfg[k] for k in ("name", "wall_time_s", "eval")}, indent=2))
+    try:
+        cfg: dict[str, Any] = load_config(a.config) if a.config else {}
+    except (FileNotFoundError, ValueError) as exc:
+        p.error(str(exc))
+    for key in ("algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "eval_episodes"):
+        if getattr(a, key) is not None:
+            cfg[key] = getattr(a, key)
+    if a.env_kwargs:
+        cfg["env_kwargs"] = {**cfg.get("env_kwargs", {}), **json.loads(a.env_kwargs)}
+    if a.algo_kwargs:
+        cfg["algo_kwargs"] = {**cfg.get("algo_kwargs", {}), **json.loads(a.algo_kwargs)}
+    if a.curriculum:
+        cur = tuple(float(v) for v in a.curriculum.split(":"))
+        if len(cur) != 2:
+            p.error(f"--curriculum must be FACTOR:FRACTION, got {a.curriculum!r}")
+        cfg["curriculum"] = cur
+    config = train(out=a.out, smoke=a.smoke, config_file=a.config, **cfg)
+    print(json.dumps({k: config[k] for k in ("name", "wall_time_s", "eval")}, indent=2))
     return 0
 
 

@@ -36,9 +36,10 @@ def evaluation_section(out: Path, quick: bool = False) -> list[str]:
         "## Evaluation: learned vs analytic",
         "",
         f"Scenario `{suite['scenario']}`, {n} episodes with seeds {suite['seed']}..{suite['seed'] + n - 1} "
-        "(paired: every policy meets the same episodes). Values with 95 % intervals (Wilson for rates, "
-        "Student t for means; for `max_formation_err` and `min_clearance` the value is the worst episode and the "
-        "interval is that of the per-episode mean). Time to goal in s over successful episodes.",
+        "(paired: every policy meets the same episodes). Means over episodes with 95 % intervals (Wilson for "
+        "rates, Student t for means; `max_formation_err` and `min_clearance` are each episode's worst value, "
+        "averaged); the worst episode's values stand in the last column. Time to goal in s over successful "
+        "episodes.",
         "",
         *markdown_table(results),
         "",

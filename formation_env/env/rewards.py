@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 if TYPE_CHECKING:
-    from .state import StepContext
+    from .state import EngineState, StepContext
 
 __all__ = ["DEFAULT_WEIGHTS", "REWARD_TERMS", "TERMS", "RewardTerm", "reward_table", "reward_term", "total_reward"]
 
@@ -59,6 +59,32 @@ def _progress(ctx: StepContext) -> Array:
 @reward_term("distance", 0.0, "-T g_i(k+1): the leader's distance to its goal, per second (m s)")
 def _distance(ctx: StepContext) -> Array:
     return -ctx.engine.dt * ctx.state.goal_dist
+
+
+#: Scales of the ``approach`` term: velocity errors weigh as position errors TAU_APPROACH s long, and the
+#: log's floor EPS_APPROACH (m) is the distance below which further approach earns little more.
+TAU_APPROACH, EPS_APPROACH = 1.0, 0.02
+
+
+def phase_distance(state: EngineState, leaders: NDArray[np.int64]) -> Array:
+    """Each leader's distance to its goal in phase space, sqrt(|p - p*|^2 + TAU^2 |v - v*|^2), (B, n_l), m."""
+    ep = state.pos[:, leaders] - state.goal[:, leaders]
+    ev = state.vel[:, leaders] - state.goal_vel[:, leaders]
+    return np.sqrt(np.einsum("bld,bld->bl", ep, ep) + TAU_APPROACH**2 * np.einsum("bld,bld->bl", ev, ev))
+
+
+@reward_term(
+    "approach",
+    0.0,
+    "log(eps + s_i(k)) - log(eps + s_i(k+1)), s_i the leader's phase-space distance to its goal state "
+    "sqrt(|p - p*|^2 + (1 s)^2 |v - v*|^2), eps = 0.02 m: potential shaping that rewards arriving and "
+    "coming to rest, as much for the last centimetres as for the first metres",
+)
+def _approach(ctx: StepContext) -> Array:
+    assert ctx.prev is not None
+    lead = ctx.engine.leaders
+    before, after = phase_distance(ctx.prev, lead), phase_distance(ctx.state, lead)
+    return np.log(EPS_APPROACH + before) - np.log(EPS_APPROACH + after)
 
 
 @reward_term("formation", 1.0, "-T e(k+1): the affine-image formation error, per second (m s)")

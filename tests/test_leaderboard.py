@@ -1,0 +1,160 @@
+"""The leaderboard, the time lower bound, the random baseline, training recipes and honest metrics."""
+
+from __future__ import annotations
+
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from agents.bounds import time_lower_bound, time_lower_bound_seeds
+from agents.policy import AnalyticPolicy, RandomPolicy, load_policy
+from agents.rollout import reset_paired, run_batch
+from formation_env.env.engine import Engine
+from formation_env.env.scenarios import REGISTRY
+from train.evaluate import evaluate, summarise
+from train.leaders import load_config
+from train.leaders import main as leaders_main
+
+
+@pytest.mark.parametrize("scenario", sorted(REGISTRY))
+def test_time_lower_bound_is_below_the_planners_time_on_every_solved_episode(scenario: str) -> None:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        eng = Engine(scenario)
+    seeds = list(range(12))
+    bound = time_lower_bound_seeds(eng, seeds)
+    t = run_batch(eng, AnalyticPolicy(eng).act_engine, seeds)["time_to_goal"]
+    solved = np.isfinite(t)
+    assert solved.any() and np.all(np.isfinite(bound))
+    assert np.all(t[solved] >= bound[solved] - 1e-9)
+
+
+def test_time_lower_bound_is_the_exact_bang_bang_time_for_one_axis() -> None:
+    """A leader D m from its goal along x reaches the tolerance ball in sqrt(2 (D - tol) / u_max) at the
+    earliest (full acceleration, arrival at speed): the bound's first sample is that time rounded up."""
+    eng = Engine("narrow_passage")
+    s = reset_paired(eng, [0])
+    D = 3.0
+    goal = s.pos.copy()
+    goal[:, :, 0] += D  # every agent's goal D m ahead along x
+    state = s._replace(goal=goal, vel=np.zeros_like(s.vel), params={**s.params, "goal_b": s.params["goal_b"]})
+    th, b = eng.affine.fit(goal)
+    state = state._replace(params={**state.params, "goal_theta": th, "goal_b": b})
+    t = float(time_lower_bound(eng, state)[0])
+    exact = np.sqrt(2 * (D - eng.scenario.goal_tol) / eng.u_max)
+    assert exact <= t < exact + eng.dt + 1e-9
+
+
+def test_random_policy_is_seeded_and_bounded() -> None:
+    eng = Engine("hold")
+    s = reset_paired(eng, [0, 1, 2])
+    a, b = RandomPolicy(eng, seed=3).act_engine(eng, s), RandomPolicy(eng, seed=3).act_engine(eng, s)
+    np.testing.assert_array_equal(a, b)
+    assert a.shape == (3, eng.n_l, eng.p) and np.all(np.abs(a) <= 1.0)
+    res = evaluate("random", "hold", 4, seed=0, generalisation=False)
+    assert res["policy"] == "random" and res["metrics"]["success_rate"] == 0.0
+
+
+def test_metrics_are_means_and_worst_values_are_apart() -> None:
+    res = {
+        "success": np.array([True, True, False, False]),
+        "collision": np.array([False, False, True, False]),
+        "time_to_goal": np.array([2.0, 4.0, np.nan, np.nan]),
+        "mean_formation_err": np.array([0.01, 0.02, 0.03, 0.04]),
+        "max_formation_err": np.array([0.1, 0.2, 0.3, 0.6]),
+        "min_clearance": np.array([0.5, 0.4, -0.1, 0.2]),
+        "control_effort": np.ones(4),
+    }
+    metrics, cis, worst = summarise(res)
+    assert metrics["max_formation_err"] == pytest.approx(0.3) and worst["max_formation_err"] == 0.6
+    assert metrics["min_clearance"] == pytest.approx(0.25) and worst["min_clearance"] == -0.1
+    assert metrics["time_to_goal"] == 3.0 and worst["time_to_goal"] == 4.0
+    lo, hi = cis["max_formation_err"]
+    assert lo < metrics["max_formation_err"] < hi
+    from scipy import stats
+
+    ci = stats.binomtest(2, 4).proportion_ci(method="wilson")
+    assert cis["success_rate"] == pytest.approx([ci.low, ci.high])
+
+
+def test_recipe_file_sets_the_arguments_and_refuses_unknown_keys(tmp_path: Path) -> None:
+    good = tmp_path / "r.yaml"
+    good.write_text(
+        "scenario: hold\nalgo_kwargs: {gamma: 0.98}\npolicy_kwargs: {net_arch: [8, 8]}\ncurriculum: [2, 0.5]\n"
+    )
+    cfg = load_config(good)
+    assert cfg["scenario"] == "hold" and cfg["algo_kwargs"] == {"gamma": 0.98} and cfg["curriculum"] == (2.0, 0.5)
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("scenaro: hold\n")
+    with pytest.raises(ValueError, match="scenaro"):
+        load_config(bad)
+    with pytest.raises(SystemExit):
+        leaders_main(["--config", str(bad), "--smoke"])
+
+
+@pytest.mark.parametrize(
+    "recipe", sorted(Path(__file__).resolve().parent.parent.joinpath("train", "configs").glob("*.yaml"))
+)
+def test_shipped_recipes_load(recipe: Path) -> None:
+    cfg = load_config(recipe)
+    assert cfg["algo"] in ("ppo", "sac") and cfg["scenario"] in REGISTRY
+
+
+@pytest.mark.slow
+def test_recipe_run_is_reproducible_and_the_leaderboard_reads_it(tmp_path: Path, capsys) -> None:
+    recipe = tmp_path / "tiny.yaml"
+    recipe.write_text(
+        "algo: ppo\nmode: commander\nscenario: hold\ntimesteps: 256\nn_envs: 2\neval_episodes: 1\n"
+        "policy_kwargs: {net_arch: [8, 8]}\nalgo_kwargs: {n_steps: 32}\n"
+    )
+    weights = []
+    for k in ("a", "b"):
+        leaders_main(["--config", str(recipe), "--smoke", "--seed", "3", "--out", str(tmp_path / k)])
+        pol = load_policy(tmp_path / k / "hold_commander.zip", Engine("hold"))
+        weights.append([p.detach().numpy().copy() for p in pol.model.policy.parameters()])
+    for x, y in zip(*weights, strict=True):
+        np.testing.assert_array_equal(x, y)
+    pol = load_policy(tmp_path / "a" / "hold_commander.zip", Engine("hold"))
+    assert pol.config["sb3_policy_kwargs"]["net_arch"] == [8, 8]  # the recipe's network
+    assert pol.model.policy.mlp_extractor.policy_net[0].out_features == 8
+    capsys.readouterr()
+    folder = tmp_path / "pretrained"
+    folder.mkdir()
+    for suffix in (".zip", "_vecnormalize.pkl", "_config.json"):
+        (folder / f"hold_ppo_commander_seed3{suffix}").write_bytes(
+            (tmp_path / "a" / f"hold_commander{suffix}").read_bytes()
+        )
+    from formation_env.cli import main as cli
+
+    md = tmp_path / "lb.md"
+    assert (
+        cli(
+            [
+                "leaderboard",
+                "--episodes",
+                "2",
+                "--scenarios",
+                "hold",
+                "--policies",
+                str(folder),
+                "--out",
+                str(md),
+                "--json",
+            ]
+        )
+        == 0
+    )
+    board = json.loads(capsys.readouterr().out)
+    rows = board["scenarios"]["hold"]
+    assert rows["random"]["kind"] == "random" and rows["analytic"]["kind"] == "analytic"
+    assert rows["ppo_commander"]["kind"] == "learned" and rows["ppo_commander"]["policies"] == [
+        "hold_ppo_commander_seed3.zip"
+    ]
+    for key in ("success_rate", "collision_rate", "time_to_goal", "time_lower_bound"):
+        assert key in rows["analytic"]["metrics"] and key in rows["ppo_commander"]["metrics"]
+    assert rows["ppo_shared"]["metrics"] is None
+    assert rows["analytic"]["metrics"]["success_rate"] == 1.0
+    assert "## hold" in md.read_text()

@@ -1,0 +1,197 @@
+"""The leaderboard: every registered scenario, every entry, on that scenario's fixed seeded suite.
+
+Entries (:data:`ENTRIES`): ``random`` (uniform actions, seeded), ``analytic`` (the scenario's tuned planner,
+:mod:`agents.planner`), and the learned ones, ``ppo_commander`` (one policy on the global state, from
+scratch), ``ppo_shared`` (decentralised leaders sharing one policy) and ``sac_commander``. A learned entry is
+the policies ``<scenario>_<entry>_seed<k>.zip`` found in the policy folder (``agents/pretrained/`` by
+default), one per training seed: its metrics are the mean over seeds of each seed's suite metrics, with the
+spread across seeds (min, max) beside them. An entry with no shipped policy is listed as not trained.
+
+Every entry of a scenario meets the same episodes (seeds ``seed .. seed + episodes - 1``). Beside the time
+to goal stands ``time_lower_bound``: the mean over the same solved episodes of :mod:`agents.bounds`' lower
+bound (over all episodes when none is solved).
+
+``formation-env leaderboard [--episodes N] [--seed S] [--json]`` writes ``docs/leaderboard.md``; with
+``--json`` it prints ``{"scenarios": {scenario: {entry: {"kind", "metrics", ...}}}}``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import re
+import time
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.bounds import time_lower_bound_seeds
+from formation_env.env.scenarios import REGISTRY
+
+from .evaluate import _finite, evaluate, make_engine
+
+__all__ = ["ENTRIES", "LEARNED", "find_policies", "leaderboard", "main", "markdown"]
+
+#: Learned entries: name -> (algo, mode).
+LEARNED: dict[str, tuple[str, str]] = {
+    "ppo_commander": ("ppo", "commander"),
+    "ppo_shared": ("ppo", "shared"),
+    "sac_commander": ("sac", "commander"),
+}
+#: Every entry, in table order.
+ENTRIES: tuple[str, ...] = ("random", "analytic", *LEARNED)
+#: Metrics of every entry (``evaluate``'s, with the time bound).
+SHOWN = ("success_rate", "collision_rate", "time_to_goal", "time_lower_bound", "mean_formation_err")
+PRETRAINED = Path(__file__).resolve().parent.parent / "agents" / "pretrained"
+
+
+def find_policies(folder: str | Path, scenario: str, entry: str) -> list[Path]:
+    """The shipped policies of a learned entry, ``<scenario>_<entry>_seed<k>.zip``, by seed."""
+    pat = re.compile(rf"^{re.escape(scenario)}_{re.escape(entry)}_seed(\d+)\.zip$")
+    found = [(int(m.group(1)), p) for p in Path(folder).glob("*.zip") if (m := pat.match(p.name))]
+    return [p for _, p in sorted(found)]
+
+
+def _with_bound(result: dict[str, Any], bound: np.ndarray) -> dict[str, float]:
+    metrics = dict(result["metrics"])
+    t = np.asarray(result["per_episode"]["time_to_goal"], dtype=np.float64)
+    solved = np.isfinite(t)
+    metrics["time_lower_bound"] = float(np.mean(bound[solved] if solved.any() else bound))
+    return metrics
+
+
+def leaderboard(
+    episodes: int = 100, seed: int = 0, policies: str | Path = PRETRAINED, scenarios: Sequence[str] | None = None
+) -> dict[str, Any]:
+    """Evaluate every entry on every scenario's suite; the JSON contract ``{"scenarios": {...}}`` plus
+    ``"episodes"``, ``"seed"``, ``"policies"``."""
+    out: dict[str, Any] = {}
+    for sc in scenarios or sorted(REGISTRY):
+        seeds = list(range(int(seed), int(seed) + int(episodes)))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            bound = time_lower_bound_seeds(make_engine(sc), seeds)
+        rows: dict[str, Any] = {}
+        for entry in ("random", "analytic"):
+            res = evaluate(entry, sc, episodes, seed, gif=False, generalisation=False)
+            rows[entry] = {
+                "kind": entry,
+                "metrics": _with_bound(res, bound),
+                "ci95": res["ci95"],
+                "worst": res["worst"],
+            }
+        for entry in LEARNED:
+            paths = find_policies(policies, sc, entry)
+            if not paths:
+                rows[entry] = {"kind": "learned", "metrics": None, "note": "no shipped policy"}
+                continue
+            per_seed = [_with_bound(evaluate(str(p), sc, episodes, seed, gif=False, generalisation=False), bound)
+                        for p in paths]  # fmt: skip
+            keys = per_seed[0].keys()
+            mean = {k: float(np.nanmean([m[k] for m in per_seed])) if _any_finite(per_seed, k) else float("nan")
+                    for k in keys}  # fmt: skip
+            spread = {k: [float(np.nanmin([m[k] for m in per_seed])), float(np.nanmax([m[k] for m in per_seed]))]
+                      if _any_finite(per_seed, k) else [float("nan")] * 2 for k in keys}  # fmt: skip
+            rows[entry] = {
+                "kind": "learned",
+                "metrics": mean,
+                "spread_across_seeds": spread,
+                "per_seed": per_seed,
+                "policies": [p.name for p in paths],
+            }
+        out[sc] = rows
+    return {"scenarios": out, "episodes": int(episodes), "seed": int(seed), "policies": str(policies)}
+
+
+def _any_finite(rows: list[dict[str, float]], key: str) -> bool:
+    return any(np.isfinite(m[key]) for m in rows)
+
+
+def _cell(entry: dict[str, Any], key: str) -> str:
+    m = entry.get("metrics")
+    if m is None:
+        return "-"
+    v = m[key]
+    txt = "-" if not np.isfinite(v) else f"{v:.3g}"
+    spread = entry.get("spread_across_seeds")
+    if spread is not None and np.isfinite(v) and len(entry.get("per_seed", [])) > 1:
+        lo, hi = spread[key]
+        txt += f" ({lo:.3g}-{hi:.3g})"
+    return txt
+
+
+def markdown(board: dict[str, Any], command: str) -> str:
+    """docs/leaderboard.md: one table per scenario, how it was made, what the columns mean."""
+    lines = [
+        "# Leaderboard",
+        "",
+        f"Made by `{command}` on {time.strftime('%Y-%m-%d')} ({platform.machine()}, {platform.python_version()}). "
+        f"{board['episodes']} episodes per scenario, seeds {board['seed']}..{board['seed'] + board['episodes'] - 1}; "
+        "every entry meets the same episodes.",
+        "",
+        "Columns: success and collision rates over the suite; time to goal (s) over solved episodes; the lower "
+        "bound on it (s, `agents/bounds.py`: the leaders' travel under the input bound, obstacles ignored) over "
+        "the same episodes; mean formation error (m). Learned entries: mean over training seeds, (min-max "
+        "across seeds) beside it; `-`: not trained or no episode solved.",
+        "",
+    ]
+    for sc, rows in board["scenarios"].items():
+        lines += [f"## {sc}", "", "| entry | " + " | ".join(SHOWN) + " | seeds |", "|---" * (len(SHOWN) + 2) + "|"]
+        for entry, row in rows.items():
+            n = len(row.get("per_seed", [])) if row["kind"] == "learned" else "-"
+            n = n if row.get("metrics") is not None else "not trained"
+            lines.append(f"| {entry} | " + " | ".join(_cell(row, k) for k in SHOWN) + f" | {n} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def summary_table(board: dict[str, Any]) -> str:
+    """The README's table: success rate and time to goal (s) of every entry on every scenario (tracking
+    scenarios, judged at their last sample, show success only)."""
+    lines = ["| scenario | " + " | ".join(ENTRIES) + " | time bound (s) |", "|---" * (len(ENTRIES) + 2) + "|"]
+    for sc, rows in board["scenarios"].items():
+        timed = REGISTRY[sc].terminate_on_success  # tracking tasks are judged at the last sample, not timed
+        cells = []
+        for e in ENTRIES:
+            m = rows[e].get("metrics")
+            if m is None:
+                cells.append("-")
+                continue
+            t = m["time_to_goal"] if timed else float("nan")
+            cells.append(f"{m['success_rate']:.2f}" + (f" / {t:.1f} s" if np.isfinite(t) else ""))
+        tb = f"{rows['analytic']['metrics']['time_lower_bound']:.1f}" if timed else "tracking"
+        lines.append(f"| {sc} | " + " | ".join(cells) + f" | {tb} |")
+    return "\n".join(lines)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="formation-env leaderboard", description=__doc__.splitlines()[0])
+    add_arguments(p)
+    return run_cli(p.parse_args(argv))
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
+    """The leaderboard's options (shared with ``formation-env leaderboard``)."""
+    p.add_argument("--episodes", type=int, default=100, help="episodes per scenario suite")
+    p.add_argument("--seed", type=int, default=0, help="first episode seed of every suite")
+    p.add_argument("--json", action="store_true", help='print one JSON object {"scenarios": {...}}')
+    p.add_argument("--policies", default=str(PRETRAINED), help="folder of the shipped learned policies")
+    p.add_argument("--scenarios", nargs="*", default=None, choices=sorted(REGISTRY), help="default: every one")
+    p.add_argument("--out", default="docs/leaderboard.md", help="the markdown file written")
+
+
+def run_cli(args: argparse.Namespace) -> int:
+    board = leaderboard(args.episodes, args.seed, args.policies, args.scenarios)
+    cmd = f"formation-env leaderboard --episodes {args.episodes} --seed {args.seed}"
+    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+    Path(args.out).write_text(markdown(board, cmd) + "\n## Summary\n\n" + summary_table(board) + "\n")
+    if args.json:
+        print(json.dumps(_finite(board)))
+    else:
+        print(summary_table(board))
+        print(f"written to {args.out}")
+    return 0

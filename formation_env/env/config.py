@@ -6,10 +6,7 @@ Nothing here steps; :class:`~formation_env.env.engine.Engine` calls these once a
   ([x', mem'] = [x, u_l, mem] M, read off ``FollowerLaw.step`` by probing it with unit vectors: every law is
   linear) is the update: one matmul. Larger ones keep a scipy.sparse CSR stress and step the core law
   itself (``FollowerLaw.step``: a sparse product, a sparse LU solve for ``dynamic``), O(n + edges).
-* Law defaults where the core's are slow or unstable: ``stationary`` without ``gain`` takes
-  g = 2 / (T (lambda_min + lambda_max)) of Omega_ff (the fastest, Theorem 1); ``dynamic_distributed`` without
-  ``rounds`` the fewest rounds (<= 30) with a stable closed loop; on a sparse stress ``linear`` without
-  ``eps`` the eps minimising the worst mode over [lambda_min, lambda_max].
+* Law defaults where the core's are slow or unstable: see :func:`make_follower_law`.
 """
 
 from __future__ import annotations
@@ -22,6 +19,7 @@ import scipy.sparse.linalg as spla
 from numpy.typing import ArrayLike, NDArray
 
 from formation_env.core.analysis import extreme_eigenvalues
+from formation_env.core.design import design_stress, trilateration_cliques
 from formation_env.core.dynamics import LinearDynamics, riccati_gain
 from formation_env.core.errors import ControlDimension, FormationError
 from formation_env.core.framework import Framework
@@ -37,7 +35,6 @@ from formation_env.core.laws import (
 from formation_env.core.stress import Partition, check_stress
 
 from .scenarios import NAMED_FRAMEWORKS, REGISTRY
-from .scenarios._base import gram_stress
 
 __all__ = [
     "DYNAMICS",
@@ -110,28 +107,14 @@ def offered_combinations() -> list[tuple[str, str, str]]:
 
 
 def _designed_stress(fw: Framework) -> Any:
-    """A stress for ``fw``: sparse (CSR) above ``MAX_AGENTS`` agents when the design is sparse, else dense."""
-    complete = len(fw.edges) == fw.n * (fw.n - 1) // 2
+    """A stress for ``fw`` by ``design_stress``: the fast constructive design on a trilateration ordering, else
+    the SDP."""
     try:
-        from formation_env.core.design import design_stress  # lazily: the design module may be absent
-    except ImportError:
-        if complete:
-            return gram_stress(fw)
-        raise FormationError(
-            f"framework {fw.name or '(custom)'} has no stress matrix: pass omega=..., or install "
-            "formation_env.core.design (design_stress); a complete graph gets the Gram stress"
-        ) from None
-    from formation_env.core.design import trilateration_cliques
-
-    try:  # a trilateration ordering gets the fast sparse construction instead of an SDP
         trilateration_cliques(fw)
         method = "constructive"
     except FormationError:
         method = "sdp"
-    res: Any = design_stress(fw, method)
-    if sp.issparse(res):
-        return sp.csr_matrix(res, dtype=np.float64) if fw.n > MAX_AGENTS else res.toarray()
-    return np.asarray(res, dtype=np.float64)
+    return design_stress(fw, method)
 
 
 def resolve_framework(
@@ -167,8 +150,7 @@ def resolve_framework(
         fw = name
     else:
         raise TypeError(f"framework must be a name or a Framework, got {type(name).__name__}")
-    if omega is not None:
-        om = omega
+    om = omega if omega is not None else om
     if om is None:
         om = _designed_stress(fw)
     if fw.n > MAX_AGENTS:  # the sparse path: never densify
@@ -238,7 +220,6 @@ def _fewest_stable_rounds(
     return 1
 
 
-# ---------------------------------------------------------------------------- law
 def _ff_spectrum(part: Partition) -> Array:
     """Eigenvalues of Omega_ff (n_f <= ``EXACT_SPECTRUM_UP_TO``), else a grid over [lambda_min, lambda_max]."""
     if part.n_f <= EXACT_SPECTRUM_UP_TO:
@@ -263,12 +244,8 @@ def _jacobi_spectrum(law: DynamicLeaderLaw) -> Array:
 def make_swarm_law(
     omega: Any, leaders: tuple[int, ...], dyn: LinearDynamics, law_name: str, dt: float, params: dict[str, Any]
 ) -> tuple[FollowerLaw, float]:
-    """The follower law on a sparse stress and the spectral radius of its error dynamics.
-
-    Fills the engine's defaults into ``params`` without a dense n x n: ``stationary`` gain
-    2 / (T (lambda_min + lambda_max)); ``linear`` eps minimising the worst mode over [lambda_min,
-    lambda_max]; ``dynamic_distributed`` the fewest rounds (<= 30) with a stable closed loop.
-    """
+    """The follower law on a sparse stress and the spectral radius of its error dynamics, with the defaults of
+    :func:`make_follower_law` filled into ``params`` without a dense n x n."""
     part = Partition(omega, leaders)
     A_d, B_d = dyn.zoh(dt)
     if law_name == "stationary" and "gain" not in params:
@@ -292,11 +269,8 @@ def make_swarm_law(
         assert isinstance(probe, DynamicLeaderLaw)
         nu = _jacobi_spectrum(probe)
         if "rounds" not in params:
-            rounds = next(
-                (m for m in range(1, 31) if spectral_radius(jacobi_modes(A_d, B_d, probe.K, nu**m)) < 1.0),
-                1,
-            )
-            params["rounds"] = rounds
+            stable = (m for m in range(1, 31) if spectral_radius(jacobi_modes(A_d, B_d, probe.K, nu**m)) < 1.0)
+            params["rounds"] = next(stable, 1)
         law = make_law(law_name, part, dyn, dt, **params)
         return law, spectral_radius(jacobi_modes(A_d, B_d, probe.K, nu ** int(params["rounds"])))
     law = make_law(law_name, part, dyn, dt, **params)
@@ -309,11 +283,17 @@ def make_follower_law(
     omega: Any, leaders: tuple[int, ...], dyn: LinearDynamics, law_name: str, dt: float, params: dict[str, Any]
 ) -> tuple[FollowerLaw, Array | None, float]:
     """The follower law with the engine's defaults filled into ``params``, its one-step linear map M
-    ([x', mem'] = [x, u_l, mem] M; None on a sparse stress) and the spectral radius of its error dynamics."""
+    ([x', mem'] = [x, u_l, mem] M; None on a sparse stress) and the spectral radius of its error dynamics.
+
+    Defaults where the core's are slow or unstable: ``stationary`` without ``gain`` takes g = 2 / (T (lambda_min +
+    lambda_max)) of Omega_ff (the fastest, Theorem 1); ``dynamic_distributed`` without ``rounds`` the fewest
+    rounds (<= 30) with a stable closed loop; on a sparse stress ``linear`` without ``eps`` the eps minimising the
+    worst mode over [lambda_min, lambda_max] (:func:`make_swarm_law`).
+    """
     if sp.issparse(omega):
         law, rho = make_swarm_law(omega, leaders, dyn, law_name, dt, params)
         return law, None, rho
-    if law_name == "stationary" and "gain" not in params:  # the gain minimising max |1 - T g lambda_i|
+    if law_name == "stationary" and "gain" not in params:
         lam = np.linalg.eigvalsh(Partition(omega, leaders).omega_ff_dense)
         params["gain"] = 2.0 / (dt * (lam[0] + lam[-1]))
     if law_name == "dynamic_distributed" and "rounds" not in params:

@@ -15,9 +15,8 @@ type               ``params[key]`` per episode  capsules at time t
                    (B, M, 2 d + 1): c0, v, r    elastically off the world box (rim against the box's faces)
 =================  ==========================  =============================================================
 
-Bounce, not wrap: a circle that wrapped would vanish at one face and appear at the other, possibly on top of
-the team; a bounce keeps its path continuous and predictable. Its position has a closed form (a triangle wave
-per axis, :func:`bounce`), so c(t) is a pure function of the episode's parameters and t.
+A moving circle bounces rather than wraps, so its path stays continuous; its position is a closed form (a
+triangle wave per axis, :func:`bounce`) of the episode's parameters and t.
 
 Shapes: B environments, n query points (agents) per environment, m capsules, R rays, d = 2 or 3. Distances
 in metres.
@@ -67,14 +66,10 @@ class Capsules(NamedTuple):
     rad: Array
 
     @staticmethod
-    def empty(B: int, d: int) -> Capsules:
-        return Capsules(np.zeros((B, 0, d)), np.zeros((B, 0, d)), np.zeros((B, 0)))
-
-    @staticmethod
     def join(parts: list[Capsules], B: int, d: int) -> Capsules:
-        """All capsules of several obstacle types side by side (B, sum m_i, ...)."""
+        """All capsules of several obstacle types side by side (B, sum m_i, ...); none: B empty sets in R^d."""
         if not parts:
-            return Capsules.empty(B, d)
+            return Capsules(np.zeros((B, 0, d)), np.zeros((B, 0, d)), np.zeros((B, 0)))
         if len(parts) == 1:
             return parts[0]
         return Capsules(*(np.concatenate([getattr(p, f) for p in parts], axis=1) for f in Capsules._fields))
@@ -89,11 +84,6 @@ class Obstacle:
 
     key: ClassVar[str] = ""
     dims: ClassVar[tuple[int, ...]] = (2, 3)
-
-    @staticmethod
-    def width(d: int) -> int:
-        """Parameter columns per obstacle."""
-        raise NotImplementedError
 
     def capsules(self, p: Array, t: Array, bounds: Array) -> Capsules:
         """The capsules at times t (B,) s of the obstacles ``p`` (B, m, width) in the world box ``bounds`` (2, d)."""
@@ -132,10 +122,6 @@ class Segment(Obstacle):
     key = "segments"
     dims = (2,)
 
-    @staticmethod
-    def width(d: int) -> int:
-        return 2 * d
-
     def capsules(self, p: Array, t: Array, bounds: Array) -> Capsules:
         return Capsules(p[:, :, 0], p[:, :, 1] - p[:, :, 0], np.zeros(p.shape[:2]))
 
@@ -144,10 +130,6 @@ class Circle(Obstacle):
     """Static discs (2D) or balls (3D): ``circles`` (B, C, d + 1), centre and radius (m)."""
 
     key = "circles"
-
-    @staticmethod
-    def width(d: int) -> int:
-        return d + 1
 
     def capsules(self, p: Array, t: Array, bounds: Array) -> Capsules:
         c = p[..., :-1]
@@ -174,10 +156,6 @@ class MovingCircle(Obstacle):
     key = "moving_circles"
     #: Speed bound (m/s) of the global state's velocity entries.
     max_speed: ClassVar[float] = 5.0
-
-    @staticmethod
-    def width(d: int) -> int:
-        return 2 * d + 1
 
     def velocity(self, p: Array, t: Array, bounds: Array) -> Array:
         """Velocities at times t (B,), (B, M, d) m/s: v with the sign of the current leg of each axis' bounce."""

@@ -4,10 +4,7 @@ A leader's observation is its blocks side by side (``Engine(observation=[...])``
 :data:`DEFAULT_OBSERVATION` is ``formation_v0``'s). Every entry is clipped to its block's finite bounds,
 and Gaussian noise of ``obs_noise`` (in each entry's own units) is added first to the blocks that are
 measurements (``noisy``). A new block is one :func:`register_block` call; the env's docstring table is
-:func:`observation_table` of the registry, so it cannot drift from the code.
-
-Symbols in the table: d the dimension, n_l the leaders, W the world box, E its extent (m), v the speed
-bound ``max_speed`` (m/s), k ``k_nearest``, R ``n_rays``, N ``n_nearest``.
+:func:`observation_table` of the registry (``FormationEnv`` lists its symbols), so it cannot drift from the code.
 """
 
 from __future__ import annotations
@@ -234,14 +231,10 @@ register_block(
 )  # fmt: skip
 
 
-def _task(ctx: StepContext) -> Array:
-    return ctx.engine.scenario.task_features(ctx)
-
-
 register_block(
     ObsBlock(
         "task", "scenario's", lambda e: len(e.scenario.task_feature_bounds()[0]),
-        lambda e: e.scenario.task_feature_bounds(), _task,
+        lambda e: e.scenario.task_feature_bounds(), lambda c: c.engine.scenario.task_features(c),
         "what the scenario says the task needs, relative to the formation (``Scenario.task_features``; e.g. "
         "the gap's position and the room left in it)", "scenario's",
     )
@@ -285,8 +278,7 @@ class Observer:
 
     def __call__(self, ctx: StepContext) -> NDArray[np.float32]:
         """Every leader's observation, (B, n_l, obs_dim) float32, clipped to the bounds."""
-        parts: list[Any] = [blk.fn(ctx) for blk in self.blocks]
-        obs = np.concatenate(parts, axis=-1) if len(parts) > 1 else np.array(parts[0], dtype=np.float64)
+        obs = np.concatenate([blk.fn(ctx) for blk in self.blocks], axis=-1, dtype=np.float64)
         if self.noise > 0.0 and ctx.rng is not None:
             if isinstance(ctx.rng, np.random.Generator):
                 noise = ctx.rng.normal(0.0, self.noise, obs.shape)

@@ -3,20 +3,12 @@
 Every array starts with the batch dim B (VMAS style), so the PettingZoo env (B = 1), ``FormationVecEnv``
 (B in the thousands) and large swarms (n up to 10,000 with a sparse stress) run this one step. The engine
 holds only constants; the state is passed in and a new one returned (gymnax style). Randomness comes only
-from the ``np.random.Generator`` given to :meth:`Engine.reset` (and to :meth:`Engine.step` for observation
-noise).
+from the generators given to :meth:`Engine.reset` and :meth:`Engine.step` (observation noise).
 
-One step, in order (each part written once; ``docs/architecture.md`` has the picture):
-
-1. **Law and dynamics** (:mod:`formation_env.env.config`): the followers' analytic law and every agent's
-   sampled dynamics, as the law's own one-step linear map (dense) or the core law itself (CSR).
-2. **Obstacles** (:mod:`formation_env.env.obstacles`): every obstacle type's capsules at the new time.
-3. **Contacts**: agent pairs (all pairs up to ``ALL_PAIRS_UP_TO`` agents, the graph's edges beyond),
-   agent-capsule clearances, the world box, and swept contacts of fast motions.
-4. **Measurements**: goal distances, the affine fit and the formation error, the success test and the
-   episode end.
-5. **Observations** (:mod:`formation_env.env.observations`, declared blocks) and **rewards**
-   (:mod:`formation_env.env.rewards`, registered terms) from the step's :class:`StepContext`.
+One step, in order (``docs/architecture.md`` has the picture): the followers' law and the sampled dynamics
+(:mod:`~formation_env.env.config`); the obstacles' capsules at the new time (:mod:`~formation_env.env.obstacles`);
+contacts; goal distances, the affine fit, success and the episode end; then observations and rewards from the
+step's :class:`StepContext`.
 """
 
 from __future__ import annotations
@@ -41,7 +33,7 @@ from .observations import DEFAULT_OBSERVATION, Observer
 from .obstacles import Capsules, clearance, pair_clearance, path_clearance, ray_directions
 from .rewards import REWARD_TERMS, TERMS, total_reward
 from .scenarios import REGISTRY
-from .scenarios._base import Scenario, affine_batch
+from .scenarios._base import Scenario, affine_batch, check_number
 from .state import EngineState, StepContext, StepInfo
 
 __all__ = [
@@ -61,6 +53,8 @@ Array = NDArray[np.float64]
 
 #: Above this many agents, agent-agent contacts are checked along the graph's edges only.
 ALL_PAIRS_UP_TO = 64
+#: The fields of ``EngineState`` but ``params`` (the last).
+_FIELDS = EngineState._fields[:-1]
 #: The info entries of a step (arrays (B,) from :meth:`Engine.step`), with their units.
 INFO_KEYS: dict[str, str] = {
     "success": "bool",
@@ -72,15 +66,6 @@ INFO_KEYS: dict[str, str] = {
     "time": "s",
     "control_effort": "(m/s)^2 or (m/s^2)^2, per leader",
 }
-
-
-def _check_number(name: str, value: Any, *, positive: bool = True, integer: bool = False) -> None:
-    kind = "integer" if integer else "number"
-    ok_types = (int, np.integer) if integer else (int, float, np.integer, np.floating)
-    if isinstance(value, bool) or not isinstance(value, ok_types):
-        raise TypeError(f"{name} must be a {'positive ' if positive else ''}{kind}, got {type(value).__name__}")
-    if not math.isfinite(value) or (value <= 0 if positive else value < 0):
-        raise FormationError(f"{name} must be {'positive' if positive else '>= 0'} and finite, got {value}")
 
 
 class Engine:
@@ -142,16 +127,16 @@ class Engine:
     ) -> None:
         if not isinstance(scenario, str) or scenario not in REGISTRY:
             raise FormationError(f"unknown scenario {scenario!r}; choose one of {sorted(REGISTRY)}")
-        _check_number("dt", dt)
-        _check_number("max_cycles", max_cycles, integer=True)
+        check_number("dt", dt)
+        check_number("max_cycles", max_cycles, integer=True)
         for nm, val in (("u_max", u_max), ("sensor_range", sensor_range), ("max_speed", max_speed)):
-            _check_number(nm, val)
-        _check_number("agent_radius", agent_radius, positive=False)
+            check_number(nm, val)
+        check_number("agent_radius", agent_radius, positive=False)
         for nm, val in (("n_rays", n_rays), ("n_nearest", n_nearest), ("k_nearest", k_nearest)):
-            _check_number(nm, val, integer=True)
-        _check_number("obs_noise", obs_noise, positive=False)
+            check_number(nm, val, integer=True)
+        check_number("obs_noise", obs_noise, positive=False)
         if sense_radius is not None:
-            _check_number("sense_radius", sense_radius)
+            check_number("sense_radius", sense_radius)
         self.scenario_name = scenario
         cls = REGISTRY[scenario]
         fw, om = config.resolve_framework(framework, omega, cls.default_framework)
@@ -179,13 +164,9 @@ class Engine:
         self.n_l: int = int(self.leaders.size)
         self.n_f: int = int(self.followers.size)
         self.other_leaders = np.array([[j for j in range(self.n_l) if j != i] for i in range(self.n_l)], dtype=np.int64)
-        self.kind = (
-            "single_integrator"
-            if dyn.is_single_integrator
-            else "double_integrator"
-            if dyn.name == "double_integrator"
-            else "general"
-        )
+        self.kind = "double_integrator" if dyn.name == "double_integrator" else "general"
+        if dyn.is_single_integrator:
+            self.kind = "single_integrator"
         lp = dict(law_params or {})
         self.law, self._M, rho = config.make_follower_law(om, fw.leaders, dyn, follower_law, self.dt, lp)
         self.law_params = lp
@@ -197,8 +178,6 @@ class Engine:
                 StabilityWarning,
                 stacklevel=2,
             )
-        mem0 = self.law.initial_memory((1,))
-        self.mem_dim = 0 if mem0 is None else int(mem0[0].size)
         self._C_T = np.ascontiguousarray(dyn.C.T)
         self._vel_from_state = not dyn.discrete and not np.any(dyn.C @ dyn.B)  # velocity is C A x
         self._CA_T = np.ascontiguousarray((dyn.C @ dyn.A).T) if self._vel_from_state else None
@@ -282,8 +261,6 @@ class Engine:
     def reset_each(self, rngs: Sequence[np.random.Generator]) -> EngineState:
         """One new episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` (the same draws; for
         vectorised envs whose copies are seeded one by one)."""
-        if not rngs:
-            raise FormationError("reset_each needs at least one generator")
         return self._start(self.scenario.reset_each(rngs))
 
     def _start(self, params: dict[str, Array]) -> EngineState:
@@ -353,7 +330,7 @@ class Engine:
             parts.append(state.memory.reshape(B, -1))
         z = np.concatenate(parts, axis=1) @ self._M
         nq = self.n * self.q
-        mem1 = z[:, nq:].reshape(B, self.n_f, self.p) if self.mem_dim else None
+        mem1 = z[:, nq:].reshape(B, self.n_f, self.p) if state.memory is not None else None
         return z[:, :nq].reshape(B, self.n, self.q), mem1
 
     def _contacts(
@@ -429,8 +406,7 @@ class Engine:
             rng: the generator of observation noise (needed only with ``obs_noise`` > 0), or one per env.
         Returns:
             (state', obs (B, n_l, obs_dim) float32, rewards (B, n_l), terminated (B,), truncated (B,), info)
-            with the arrays of ``INFO_KEYS``: success, collision, out_of_bounds (B,) bool; formation_error,
-            min_clearance, goal_distance (m) and time (s) (B,); control_effort (B, n_l), |u_i|^2.
+            with the arrays (B,) of ``INFO_KEYS`` (control_effort (B, n_l): |u_i|^2).
         """
         B = state.batch_size
         a = np.clip(self.check_actions(actions, B), -1.0, 1.0)
@@ -494,20 +470,16 @@ class Engine:
         t = float(state.k[b] * self.dt)
         gd = float(np.max(np.linalg.norm(state.goal[b] - state.pos[b], axis=-1)))
         status = text or f"{self.scenario_name}  t={t:.1f} s  formation error {state.err[b]:.3f} m  goal {gd:.2f} m"
-        shapes: dict[str, list[Array]] = {"segments": [], "circles": []}
+        shapes = {"segments": [np.zeros((0, 2, self.d))], "circles": [np.zeros((0, self.d + 1))]}
         for ob in self.obstacles:
             for key, arr in ob.shapes(state.params[ob.key][b], t, self.bounds).items():
                 shapes[key].append(arr)
-        obstacles = {
-            "segments": np.concatenate(shapes["segments"]) if shapes["segments"] else np.zeros((0, 2, self.d)),
-            "circles": np.concatenate(shapes["circles"]) if shapes["circles"] else np.zeros((0, self.d + 1)),
-        }
         return {
             "positions": state.pos[b],
             "leaders": self.leaders,
             "edges": self.fw.edge_array(),
             "targets": self.affine_targets(state)[b] if not self.sparse else state.pos[b],
-            "obstacles": obstacles,
+            "obstacles": {key: np.concatenate(parts) for key, parts in shapes.items()},
             "goal": state.goal[b],
             "trail": np.zeros((0, self.n, self.d)) if trail is None else trail,
             "bounds": self.bounds,
@@ -519,41 +491,34 @@ class Engine:
     @staticmethod
     def concat(states: Sequence[EngineState]) -> EngineState:
         """Join states along the batch dim (e.g. B = 1 resets into one batch), in order."""
-        first = states[0]
-        params = {kk: np.concatenate([s.params[kk] for s in states]) for kk in first.params}
-        for arr in params.values():
-            arr.setflags(write=False)
-        fields = {
-            f: None if getattr(first, f) is None else np.concatenate([getattr(s, f) for s in states])
-            for f in EngineState._fields
-            if f != "params"
-        }
-        return EngineState(**fields, params=params)  # type: ignore[arg-type]
+        columns = zip(*(s[:-1] for s in states), strict=True)  # each field but params, over the states
+        fields = {f: None if x[0] is None else np.concatenate(x) for f, x in zip(_FIELDS, columns, strict=True)}
+        return _frozen(fields, {kk: np.concatenate([s.params[kk] for s in states]) for kk in states[0].params})
 
     @staticmethod
     def select(state: EngineState, index: ArrayLike) -> EngineState:
         """The sub-batch ``index`` of ``state`` (for tests and vectorised resets)."""
         idx = np.atleast_1d(np.asarray(index))
-        params = {kk: vv[idx] for kk, vv in state.params.items()}
-        for arr in params.values():
-            arr.setflags(write=False)
-        fields = {f: None if getattr(state, f) is None else getattr(state, f)[idx] for f in EngineState._fields[:-1]}
-        return EngineState(**fields, params=params)  # type: ignore[arg-type]
+        fields = {f: None if v is None else v[idx] for f, v in zip(_FIELDS, state, strict=False)}
+        return _frozen(fields, {kk: vv[idx] for kk, vv in state.params.items()})
 
     @staticmethod
     def replace_rows(state: EngineState, rows: NDArray[np.int64], new: EngineState) -> EngineState:
         """``state`` with batch rows ``rows`` replaced by the rows of ``new`` (auto-resets)."""
 
-        def put(old: Array | None, val: Array | None) -> Array | None:
+        def put(old: Any, val: Any) -> Any:
             if old is None or val is None:
                 return old
             out = old.copy()
             out[rows] = val
             return out
 
-        params = {kk: put(vv, new.params[kk]) for kk, vv in state.params.items()}
-        for arr in params.values():
-            assert arr is not None
-            arr.setflags(write=False)
-        fields = {f: put(getattr(state, f), getattr(new, f)) for f in EngineState._fields[:-1]}
-        return EngineState(**fields, params=params)  # type: ignore[arg-type]
+        fields = {f: put(v, w) for f, v, w in zip(_FIELDS, state, new, strict=False)}
+        return _frozen(fields, {kk: put(vv, new.params[kk]) for kk, vv in state.params.items()})
+
+
+def _frozen(fields: dict[str, Any], params: dict[str, Array]) -> EngineState:
+    """An ``EngineState`` of ``fields`` whose ``params`` are made read-only."""
+    for arr in params.values():
+        arr.setflags(write=False)
+    return EngineState(**fields, params=params)

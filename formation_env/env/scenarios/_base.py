@@ -1,28 +1,13 @@
 """The scenario interface, shared batched pose helpers, and the env's named frameworks.
 
-A scenario is a small class in its own file (MPE2 ``scenarios/``, VMAS ``BaseScenario``). The engine owns
-the dynamics, the follower law, contacts, observations and rewards; a scenario supplies the task and owns
-its metadata:
-
-* ``__init__(fw, *, agent_radius, horizon, **kwargs)`` ("make"): reads its own keyword arguments (in
-  ``_init``) and refuses unknown ones.
-* ``draws()`` and ``build(raw)``: the episode's random draws in stream order (:class:`Draw`: uniform in a
-  range, standard normal, or a sign), and the draw-free, batched map from them to the per-episode arrays.
-  From these the base class makes ``reset(rng, B)`` (B episodes from one generator) and ``reset_each(rngs)``
-  (one episode per generator, equal to ``reset(rngs[b], 1)``: the vectorised env's auto-reset).
-* ``obstacle_types``: the obstacle components it uses (:mod:`formation_env.env.obstacles`); ``build`` gives
-  each type's parameters under the type's key (e.g. ``params["segments"]``). The step knows no scenario.
-* ``reference(params, t)``: the goal pose (Theta(t), b(t)) at times t for scenarios whose goal moves
-  (``moving_goal``); static goals are ``goal_theta`` and ``goal_b`` from ``build``.
-* ``param_vector(params)`` with ``param_low`` / ``param_high``: what a policy needs to decode the task from
-  the global state (``state()``), e.g. the wall's place and the gap.
-* ``task_features(ctx)`` with ``task_feature_bounds()``: the optional ``task`` observation block, the task
-  relative to the formation (e.g. where the gap is and how much room it leaves).
-* ``is_success(goal_distance, formation_error)``: the success test at one sample.
-* ``grows_world``: the world box grows to hold a large framework (tasks that pose the formation itself);
-  otherwise a framework too large for the obstacles is refused (:meth:`Scenario.fit_world`).
-* ``planner``: ``"module:Class"`` of its analytic planner (under ``agents/``), or None.
-* ``weights``: its reward weights over the defaults (:mod:`formation_env.env.rewards`).
+A scenario is a small class in its own file (MPE2 ``scenarios/``, VMAS ``BaseScenario``) that supplies the task;
+the engine owns the dynamics, the follower law, contacts, observations and rewards, and knows no scenario. The
+hooks of :class:`Scenario`: ``_init`` reads its own keyword arguments (unknown ones are refused); ``draws`` and
+``build`` give the episode's random draws in stream order (:class:`Draw`) and the draw-free, batched map from
+them to the per-episode arrays (obstacles under their types' keys), from which the base class makes
+``reset(rng, B)`` and ``reset_each(rngs)`` (the vectorised env's auto-reset); ``reference`` (moving goals);
+``param_vector`` and ``decode_params`` (the task in the global state); ``task_features`` (the ``task``
+observation block); ``is_success``.
 
 Goal poses are affine images x_i* = Theta r_i + b (paper eq. 7) of the nominal configuration r; every pose
 array is batched: Theta (B, d, d), b (B, d).
@@ -66,11 +51,6 @@ Array = NDArray[np.float64]
 REACH = 2.2
 #: Up to this many agents the start-gap test checks all pairs; above, a k-d tree.
 ALL_PAIRS_GAP_UP_TO = 512
-
-
-def _root(u: Array, d: int) -> Array:
-    """u^(1/d) elementwise (the followers' start radii, uniform in a d-ball)."""
-    return np.sqrt(u) if d == 2 else np.power(u, 1.0 / d)
 
 
 def uniform(rng: np.random.Generator, bounds: tuple[float, float], size: int | tuple[int, ...]) -> Array:
@@ -128,11 +108,8 @@ def gram_stress(fw: Framework) -> Array:
 
 
 def bipyramid_3d() -> Framework:
-    """A 6-agent 3D framework: 4 leaders (triangle plus apex) and 2 followers (lower apex, tail).
-
-    Leaders (1, 0, 0), (-0.5, 0.9, 0), (-0.5, -0.9, 0), (0, 0, 1); followers
-    (0, 0, -1), (-1.5, 0, 0.2); complete graph (its stress is :func:`gram_stress`).
-    """
+    """A 6-agent 3D framework: 4 leaders (triangle plus apex) and 2 followers (lower apex, tail), complete graph
+    (its stress is :func:`gram_stress`)."""
     r = np.array(
         [[1.0, 0.0, 0.0], [-0.5, 0.9, 0.0], [-0.5, -0.9, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [-1.5, 0.0, 0.2]]
     )
@@ -160,7 +137,7 @@ NAMED_FRAMEWORKS: dict[str, Callable[[], tuple[Framework, Array]]] = {
 
 
 class Scenario:
-    """Base class of the scenarios (see the module docstring for the hooks).
+    """Base class of the scenarios (the module docstring lists the hooks).
 
     Class attributes:
         name: registry key.
@@ -169,11 +146,14 @@ class Scenario:
         moving_goal: the goal pose is time-varying (``reference``).
         terminate_on_success: success ends the episode (else it is judged every step, for the last).
         half_size: half-width (m) of the world box centred on the origin, per axis.
-        obstacle_types: its obstacle components. grows_world, planner, weights: see the module docstring.
+        obstacle_types: its obstacle components (:mod:`formation_env.env.obstacles`).
+        grows_world: the world box grows to hold a large framework (:meth:`fit_world`).
+        planner: ``"module:Class"`` of its analytic planner (under ``agents/``), or None.
+        weights: its reward weights over the defaults (:mod:`formation_env.env.rewards`).
 
     Instance attributes set by ``__init__``: ``fw``, ``d``, ``r``, ``bounds`` (2, d), ``goal_tol`` (m, every
     agent within it of its goal), ``formation_tol`` (m, formation error below it), ``hold_steps``
-    (consecutive successful samples needed), ``weights`` (its reward weights).
+    (consecutive successful samples needed).
     """
 
     name: ClassVar[str] = ""
@@ -202,8 +182,10 @@ class Scenario:
         self.r = fw.positions
         self.agent_radius = float(agent_radius)
         self.horizon = float(horizon)
-        self.goal_tol = _positive("goal_tol", kwargs.pop("goal_tol", self.goal_tol_default))
-        self.formation_tol = _positive("formation_tol", kwargs.pop("formation_tol", self.formation_tol_default))
+        self.goal_tol = float(check_number("goal_tol", kwargs.pop("goal_tol", self.goal_tol_default)))
+        self.formation_tol = float(
+            check_number("formation_tol", kwargs.pop("formation_tol", self.formation_tol_default))
+        )
         hs = kwargs.pop("hold_steps", self.hold_steps_default)
         if isinstance(hs, bool) or not isinstance(hs, (int, np.integer)) or hs < 1:
             raise FormationError(f"hold_steps must be an integer >= 1, got {hs!r}")
@@ -300,22 +282,13 @@ class Scenario:
         """B episodes from one generator: the params of :meth:`build` with ``start`` (B, n, d). Each draw of
         :meth:`draws` is one generator call for all B episodes, in order; then the followers' noise is redrawn
         (for the episodes whose agents start too close) one draw per episode a round."""
-        raw = self._plan.draw(rng, B)
-        params, pose = self.build(raw)
-        if pose is not None:
-            params["start"] = self._place_start(pose, raw, lambda todo: self._noise_plan.draw(rng, todo.size))
-        return params
+        return self._episodes(self._plan.draw(rng, B), lambda todo: self._noise_plan.draw(rng, todo.size))
 
     def reset_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
         """One episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` (the same draws; the
         geometry runs once for all episodes). The generators must be distinct objects."""
-        raw = self._plan.draw_each(rngs)
-        params, pose = self.build(raw)
-        if pose is not None:
-            params["start"] = self._place_start(
-                pose, raw, lambda todo: self._noise_plan.draw_each([rngs[b] for b in todo.tolist()])
-            )
-        return params
+        redraw = lambda todo: self._noise_plan.draw_each([rngs[b] for b in todo.tolist()])  # noqa: E731
+        return self._episodes(self._plan.draw_each(rngs), redraw)
 
     # ---------------------------------------------------------------- helpers
     def follower_draws(self) -> list[Draw]:
@@ -341,7 +314,8 @@ class Scenario:
         returns that test (m,)."""
         dirs = noise["_dirs"]
         dirs = dirs / np.sqrt(np.sum(dirs * dirs, axis=-1, keepdims=True))
-        rad = self.follower_noise * _root(noise["_u"], self.d)
+        u = noise["_u"]
+        rad = self.follower_noise * (np.sqrt(u) if self.d == 2 else np.power(u, 1.0 / self.d))  # uniform in a ball
         trial = base[todo]
         trial[:, list(self.fw.followers)] += dirs * rad[:, :, None]
         gap3 = 3.0 * self.agent_radius
@@ -356,33 +330,37 @@ class Scenario:
         out[todo[ok]] = trial[ok]
         return ok
 
-    def _place_start(
-        self, pose: tuple[Array, Array], raw: dict[str, Array], redraw: Callable[[NDArray[np.intp]], dict[str, Array]]
-    ) -> Array:
-        """Start positions (B, n, d): leaders on ``pose`` = (Theta0, b0) at rest, followers there moved by the
-        noise draws ``_dirs``, ``_u`` of ``raw`` (none: no noise). Episodes whose agents would start closer than
-        3 radii draw again (``redraw(episodes)``), ``start_tries`` draws in all; those still too close keep
-        zero noise."""
-        base = affine_batch(self.r, *pose)
-        if "_u" not in raw:
-            return base
-        out = base.copy()
-        todo = np.arange(base.shape[0])
-        noise = raw
-        for _ in range(self.start_tries):
-            todo = todo[~self._noisy(out, base, todo, noise)]
-            if todo.size == 0:
-                break
-            noise = redraw(todo)
-        return out
+    def _episodes(
+        self, raw: dict[str, Array], redraw: Callable[[NDArray[np.intp]], dict[str, Array]]
+    ) -> dict[str, Array]:
+        """The params of :meth:`build` from the draws ``raw``, with ``start`` (B, n, d) where ``build`` gives a pose:
+        leaders on it at rest, followers there moved by the noise draws ``_dirs``, ``_u`` of ``raw`` (none: no
+        noise). Episodes whose agents would start closer than 3 radii draw again (``redraw(episodes)``),
+        ``start_tries`` draws in all; those still too close keep zero noise."""
+        params, pose = self.build(raw)
+        if pose is None:
+            return params
+        params["start"] = base = affine_batch(self.r, *pose)
+        if "_u" in raw:
+            params["start"] = out = base.copy()
+            todo, noise = np.arange(base.shape[0]), raw
+            for _ in range(self.start_tries):
+                todo = todo[~self._noisy(out, base, todo, noise)]
+                if todo.size == 0:
+                    break
+                noise = redraw(todo)
+        return params
 
 
-def _positive(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name} must be a positive number, got {type(value).__name__}")
-    if not (math.isfinite(value) and value > 0):
-        raise FormationError(f"{name} must be positive and finite, got {value}")
-    return float(value)
+def check_number(name: str, value: Any, *, positive: bool = True, integer: bool = False) -> Any:
+    """``value``, checked: a number (TypeError otherwise), finite and positive (``positive``) or >= 0."""
+    kind = "integer" if integer else "number"
+    ok_types = (int, np.integer) if integer else (int, float, np.integer, np.floating)
+    if isinstance(value, bool) or not isinstance(value, ok_types):
+        raise TypeError(f"{name} must be a {'positive ' if positive else ''}{kind}, got {type(value).__name__}")
+    if not math.isfinite(value) or (value <= 0 if positive else value < 0):
+        raise FormationError(f"{name} must be {'positive' if positive else '>= 0'} and finite, got {value}")
+    return value
 
 
 def check_range(name: str, value: Any, lo: float = -math.inf, hi: float = math.inf) -> tuple[float, float]:

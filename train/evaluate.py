@@ -130,6 +130,20 @@ def summarise(res: dict[str, Any]) -> tuple[dict[str, float], dict[str, list[flo
     return metrics, cis, worst
 
 
+#: Engine arguments that shape what a policy observes: a learned policy is evaluated with its training values
+#: of these (and the scenario's own success test, whatever its training used).
+SENSING_KWARGS = ("observation", "k_nearest", "sense_radius", "obs_noise", "n_rays", "n_nearest", "sensor_range")
+
+
+def sensing_kwargs(path: str | Path) -> dict[str, Any]:
+    """The :data:`SENSING_KWARGS` of a saved policy's training config (none when it has no config)."""
+    from agents.policy import LearnedPolicy
+
+    cp = LearnedPolicy.paths(path)[2]
+    cfg = json.loads(cp.read_text()) if cp.exists() else {}
+    return {k: v for k, v in cfg.get("env_kwargs", {}).items() if k in SENSING_KWARGS}
+
+
 def make_engine(scenario: str, env_kwargs: dict[str, Any] | None = None) -> Engine:
     """The evaluation engine (the env's defaults: double integrators, ``dynamic`` law, dt 0.1 s, 400 samples)."""
     return Engine(scenario, **(env_kwargs or {}))
@@ -168,6 +182,8 @@ def evaluate(
     """
     from agents.policy import load_policy
 
+    if env_kwargs is None and isinstance(policy_spec, (str, Path)) and str(policy_spec).endswith(".zip"):
+        env_kwargs = sensing_kwargs(policy_spec)
     engine = make_engine(scenario, env_kwargs)
     policy = load_policy(policy_spec, engine) if isinstance(policy_spec, (str, Path)) else policy_spec
     seeds = list(range(int(seed), int(seed) + int(episodes)))

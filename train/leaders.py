@@ -81,7 +81,7 @@ SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
 #: The keys a recipe file may hold (the rest is refused, naming the key).
 CONFIG_KEYS = (
     "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
-    "curriculum", "algo_kwargs", "policy_kwargs",
+    "curriculum", "algo_kwargs", "policy_kwargs", "env_version",
 )  # fmt: skip
 
 
@@ -255,6 +255,7 @@ def train(
     algo_kwargs: dict[str, Any] | None = None,
     policy_kwargs: dict[str, Any] | None = None,
     config_file: str | None = None,
+    env_version: int = 0,
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -271,6 +272,8 @@ def train(
         algo_kwargs: the algorithm's hyperparameters over :data:`ALGO_DEFAULTS` (e.g. ``n_steps``, ``gamma``).
         policy_kwargs: SB3 ``policy_kwargs`` over :data:`POLICY_DEFAULTS` (e.g. ``net_arch``, ``log_std_init``).
         config_file: the recipe file these came from (recorded in the saved config).
+        env_version: the env version whose defaults ``env_kwargs`` sit over (:mod:`formation_env.env.versions`;
+            1 is ``formation_v1``).
     """
     import torch
     from stable_baselines3 import PPO, SAC
@@ -278,7 +281,9 @@ def train(
     torch.set_num_threads(1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    env_kwargs = dict(env_kwargs or {})
+    from formation_env.env.versions import with_version
+
+    env_kwargs = with_version(env_version, dict(env_kwargs or {}))
     if smoke:
         timesteps = min(int(timesteps), 1024)
         n_envs = min(n_envs, 4)
@@ -337,6 +342,7 @@ def train(
         "n_envs": int(n_envs),
         "residual": float(residual),
         "curriculum": None if curriculum is None else list(curriculum),
+        "env_version": int(env_version),
         "env_kwargs": env_kwargs,
         "observation": "global_state" if mode == "commander" else "leader_observation",
         "wall_time_s": round(wall, 1),
@@ -384,6 +390,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--env-kwargs", default="", help='JSON engine arguments, e.g. {"reward_weights": {"distance": 0.2}}')
     p.add_argument("--algo-kwargs", default="", help='JSON hyperparameters over the recipe\'s, e.g. {"gamma": 0.995}')
     p.add_argument("--eval-episodes", type=int, default=None)
+    p.add_argument("--env-version", type=int, default=None, help="env version of the defaults (0, 1); default 0")
     p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
     p.add_argument(
         "--curriculum",
@@ -396,7 +403,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         cfg: dict[str, Any] = load_config(a.config) if a.config else {}
     except (FileNotFoundError, ValueError) as exc:
         p.error(str(exc))
-    for key in ("algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "eval_episodes"):
+    for key in ("algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "eval_episodes", "env_version"):
         if getattr(a, key) is not None:
             cfg[key] = getattr(a, key)
     if a.env_kwargs:

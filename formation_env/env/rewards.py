@@ -103,6 +103,20 @@ def _collision(ctx: StepContext) -> Array:
     return -ctx.collision.astype(np.float64)
 
 
+#: Clearance (m) below which the ``proximity`` term starts to cost.
+PROXIMITY_MARGIN = 0.3
+
+
+@reward_term(
+    "proximity",
+    0.0,
+    "-T max(0, 1 - c / 0.3 m), c the smallest gap between surfaces (agents, obstacles): a warning that grows "
+    "from 0 at 0.3 m clearance to 1 per second at contact, before the collision penalty",
+)
+def _proximity(ctx: StepContext) -> Array:
+    return -ctx.engine.dt * np.clip(1.0 - ctx.clearance / PROXIMITY_MARGIN, 0.0, 1.0)
+
+
 @reward_term("success", 10.0, "+1 on success")
 def _success(ctx: StepContext) -> Array:
     return ctx.success.astype(np.float64)

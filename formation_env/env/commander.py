@@ -17,8 +17,8 @@ from formation_env.core.errors import FormationError
 
 from .control import track_targets
 from .engine import Engine, EngineState, StepInfo
-from .formation import neutral_info
-from .scenarios._base import affine_batch, rotation_3d
+from .formation import SingleEnv
+from .scenarios._base import affine_batch, rotation_2d, rotation_3d
 
 __all__ = ["ACTION_MODES", "FormationCommanderEnv"]
 
@@ -26,7 +26,7 @@ ACTION_MODES = ("leaders", "maneuver")
 Array = NDArray[np.float64]
 
 
-class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     """A single-agent view of the formation env: one action commands all leaders.
 
     ## Description
@@ -89,10 +89,7 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise FormationError(f"action_mode must be one of {list(ACTION_MODES)}, got {action_mode!r}")
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise FormationError(
-                f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
+        self._check_render_mode(render_mode)
         self.engine = eng = Engine(scenario, **kwargs)
         self.action_mode = action_mode
         self.render_mode = render_mode
@@ -107,17 +104,15 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             raise FormationError(f"scale_range must satisfy 0 < lo < 1 < hi, got {scale_range}")
         self._iu = np.triu_indices(d, 1)
         low, high = eng.state_low, eng.state_high
-        self._n_act = eng.n_l * eng.p if action_mode == "leaders" else d * (d + 1)
-        self.action_space = spaces.Box(-1.0, 1.0, (self._n_act,), dtype=np.float32)
+        n_act = eng.n_l * eng.p if action_mode == "leaders" else d * (d + 1)
+        self.action_space = spaces.Box(-1.0, 1.0, (n_act,), dtype=np.float32)
         if action_mode == "maneuver":
             low = np.concatenate([low, np.full(d * d, -6.0, np.float32), eng.bounds[0].astype(np.float32)])
             high = np.concatenate([high, np.full(d * d, 6.0, np.float32), eng.bounds[1].astype(np.float32)])
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        self._obs_low, self._obs_high = low, high
         self._state: EngineState | None = None
         self._done = False
         self._pose: dict[str, Array] = {}
-        self._renderer: Any = None
 
     # ------------------------------------------------------------------ pose (maneuver mode), batched
     def _theta(self) -> Array:
@@ -143,27 +138,23 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         p["s"] = np.clip(p["s"] * np.exp(self.rates[1] * dt * sc), *self.scale_range)
         ang = self.rates[2] * dt * rot
         if d == 2:
-            c, s_ = np.cos(ang[:, 0]), np.sin(ang[:, 0])
-            step = np.stack([np.stack([c, -s_], -1), np.stack([s_, c], -1)], -2)
+            step = rotation_2d(ang[:, 0])
         else:
             norm = np.linalg.norm(ang, axis=-1)
             axis = np.where(norm[:, None] > 0, ang, np.array([0.0, 0.0, 1.0]))
             step = rotation_3d(axis, norm)
         p["R"] = step @ p["R"]
-        H = p["H"].copy()
-        H[:, self._iu[0], self._iu[1]] = np.clip(H[:, self._iu[0], self._iu[1]] + self.rates[3] * dt * sh, -1.0, 1.0)
-        p["H"] = H
+        i, j = self._iu
+        p["H"][:, i, j] = np.clip(p["H"][:, i, j] + self.rates[3] * dt * sh, -1.0, 1.0)
 
     # ------------------------------------------------------------------ gym API
-    def _obs(self, g: NDArray[np.float32] | None = None) -> NDArray[np.float32]:
-        """The observation of the current state; ``g``: its global state, if at hand."""
-        assert self._state is not None
-        if g is None:
-            g = self.engine.global_state(self._state)[0]
+    def _obs(self) -> NDArray[np.float32]:
+        """The observation of the current state."""
+        g = self.engine.global_state(self._state_or_raise("step"))[0]
         if self.action_mode == "leaders":
             return g
         extra = np.concatenate([self._theta()[0].reshape(-1), self._pose["b"][0]]).astype(np.float32)
-        return np.clip(np.concatenate([g, extra]), self._obs_low, self._obs_high)
+        return np.clip(np.concatenate([g, extra]), self.observation_space.low, self.observation_space.high)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -173,15 +164,11 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
         self._done = False
         if self.action_mode == "maneuver":
             self._init_pose(self._state)
-        self._trail = [self._state.pos[0]]
-        if self.render_mode == "human":
-            self.render()
-        gd = float(np.max(np.linalg.norm(self._state.goal[0] - self._state.pos[0], axis=-1)))
-        return self._obs(), neutral_info(gd, float(self._state.err[0]))
+        self._show(reset=True)
+        return self._obs(), self._reset_info()
 
     def step(self, action: Any) -> tuple[NDArray[np.float32], SupportsFloat, bool, bool, dict[str, Any]]:
-        if self._state is None:
-            raise FormationError("call reset() before step()")
+        state = self._state_or_raise("step")
         if self._done:
             raise FormationError("the episode is over: call reset() before step()")
         eng = self.engine
@@ -201,33 +188,11 @@ class FormationCommanderEnv(gym.Env[NDArray[np.float32], NDArray[np.float32]]):
             before = affine_batch(rl, self._theta(), self._pose["b"])
             self._advance_pose(a)
             after = affine_batch(rl, self._theta(), self._pose["b"])
-            leader_a = track_targets(eng, self._state, after, (after - before) / eng.dt)
-        self._state, _, rew, term, trunc, inf = eng.step(self._state, leader_a, self.np_random)
+            leader_a = track_targets(eng, state, after, (after - before) / eng.dt)
+        self._state, _, rew, term, trunc, inf = eng.step(state, leader_a, self.np_random)
         out = StepInfo({key: val[0].item() for key, val in inf.items() if key != "control_effort"})
         out["control_effort"] = float(inf["control_effort"][0].sum())
         terminated, truncated = bool(term[0]), bool(trunc[0])
         self._done = terminated or truncated
-        if self.render_mode is not None:  # the trail is drawn only
-            self._trail.append(self._state.pos[0])
-            del self._trail[:-60]
-        if self.render_mode == "human":
-            self.render()
+        self._show()
         return self._obs(), float(rew[0].mean()), terminated, truncated, out
-
-    def render(self) -> NDArray[np.uint8] | None:
-        if self.render_mode is None:
-            gym.logger.warn("render() called with render_mode=None: nothing to draw")
-            return None
-        if self._state is None:
-            raise FormationError("call reset() before render()")
-        if self._renderer is None:
-            from .rendering import Renderer
-
-            self._renderer = Renderer(self.engine.d, self.render_mode, fps=self.metadata["render_fps"])
-        frame = self.engine.frame(self._state, 0, np.stack(self._trail))
-        return self._renderer.draw(frame)
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None

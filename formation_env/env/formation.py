@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -32,7 +33,66 @@ def neutral_info(goal_distance: float, formation_error: float) -> StepInfo:
     return StepInfo(values)
 
 
-class FormationEnv(ParallelEnv, EzPickle):
+class SingleEnv:
+    """What the PettingZoo and the Gymnasium envs share: checks, the reset info, the trail and rendering."""
+
+    metadata: dict[str, Any]
+    engine: Engine
+    render_mode: str | None
+    _state: EngineState | None
+    _trail: list[NDArray[np.float64]]
+    _renderer: Any = None
+    #: Samples of the positions' trail drawn behind the agents.
+    trail_length = 60
+
+    def _check_render_mode(self, render_mode: str | None) -> None:
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise FormationError(
+                f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
+            )
+
+    def _state_or_raise(self, method: str) -> EngineState:
+        if self._state is None:
+            raise FormationError(f"call reset() before {method}()")
+        return self._state
+
+    def _reset_info(self) -> StepInfo:
+        """The info of a reset: every key at its neutral value; goal distance and formation error measured."""
+        st = self._state_or_raise("reset")
+        gd = float(np.max(np.linalg.norm(st.goal[0] - st.pos[0], axis=-1)))
+        return neutral_info(gd, float(st.err[0]))
+
+    def _show(self, reset: bool = False) -> None:
+        """Extend the trail by the current positions (start it anew at a reset) and draw in ``human`` mode."""
+        pos = self._state_or_raise("reset").pos[0]
+        if reset:
+            self._trail = [pos]
+        elif self.render_mode is not None:  # the trail is drawn only
+            self._trail.append(pos)
+            del self._trail[: -self.trail_length]
+        if self.render_mode == "human":
+            self.render()
+
+    def render(self) -> NDArray[np.uint8] | None:
+        """Draw the current frame: an (H, W, 3) uint8 array (``rgb_array``), or a window (``human``)."""
+        if self.render_mode is None:
+            warnings.warn("render() called with render_mode=None: nothing to draw", stacklevel=2)
+            return None
+        state = self._state_or_raise("render")
+        if self._renderer is None:
+            from .rendering import Renderer
+
+            self._renderer = Renderer(self.engine.d, self.render_mode, fps=self.metadata["render_fps"])
+        return self._renderer.draw(self.engine.frame(state, 0, np.stack(self._trail)))
+
+    def close(self) -> None:
+        """Close the renderer (if one was opened)."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+
+class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
     """Leader-follower affine formation control (Zhao & Zelazo's stress-matrix laws, sampled in discrete time).
 
         ## Description
@@ -43,9 +103,8 @@ class FormationEnv(ParallelEnv, EzPickle):
         (``follower_law``: ``stationary`` eq. 17, ``dynamic`` eq. 21 solved exactly,
         ``dynamic_distributed`` with m Jacobi rounds, ``linear`` with the Riccati gain of Theorem 3).
         By moving, the leaders steer the whole formation through translation, rotation, scaling
-        and shear (the affine image), e.g. shrinking it to pass a gap. Scenarios (``scenario``):
-        ``hold``, ``maneuver``, ``maneuver_3d``, ``narrow_passage``, ``obstacle_field``, ``moving_obstacles``
-        (``formation_env.env.scenarios``; each file's docstring gives its geometry and success test).
+        and shear (the affine image), e.g. shrinking it to pass a gap. ``scenario`` is a name of
+        ``formation_env.env.scenarios.REGISTRY`` (each file's docstring gives its geometry and success test).
 
         ## Action Space
 
@@ -69,9 +128,7 @@ class FormationEnv(ParallelEnv, EzPickle):
 
         Options for decentralised leaders: ``nearest_agents`` with ``k_nearest`` and ``sense_radius`` (m), which
         also limits the obstacle range; ``agent_id``; ``obs_noise`` (Gaussian, each entry's units, on the
-        measurement blocks). ``state()`` (``state_space``) is the global vector: positions, velocities, goal
-        positions and goal velocities of all n agents, formation error, fitted Theta, the scenario's parameters,
-        the moving obstacles' current centres, velocities and radii, time fraction.
+        measurement blocks). ``state()`` (``state_space``) is the global vector (``Engine.global_state``).
 
         ## Rewards
 
@@ -97,11 +154,9 @@ class FormationEnv(ParallelEnv, EzPickle):
         ## Arguments
 
         ``formation_v0.parallel_env(scenario="narrow_passage", dynamics="double_integrator",
-        follower_law="dynamic", dt=0.1, max_cycles=400, render_mode=None, **kwargs)`` with keyword
-        arguments ``framework`` (name or ``Framework``), ``omega``, ``law_params``, ``u_max`` (1.0),
-        ``agent_radius`` (0.1 m), ``n_rays`` (16), ``n_nearest`` (2), ``sensor_range`` (3 m),
-        ``max_speed`` (3 m/s), ``reward_weights``, and the scenario's own (e.g. ``gap_width``);
-        unknown ones raise TypeError. ``stationary`` is offered with single integrators only.
+        follower_law="dynamic", dt=0.1, max_cycles=400, render_mode=None, **kwargs)`` with the keyword
+        arguments of :class:`~formation_env.env.engine.Engine` (``framework``, ``omega``, ``u_max``, ...) and the
+        scenario's own (e.g. ``gap_width``); unknown ones raise TypeError. ``stationary`` needs single integrators.
 
         Info per agent per step (a fresh dict; ``reset`` gives every key with its neutral value): ``success``,
         ``collision``, ``out_of_bounds`` (bool), ``formation_error``, ``min_clearance`` (m; smallest agent-agent
@@ -146,10 +201,7 @@ class FormationEnv(ParallelEnv, EzPickle):
             render_mode=render_mode,
             **kwargs,
         )
-        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise FormationError(
-                f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
-            )
+        self._check_render_mode(render_mode)
         self.engine = Engine(scenario, dynamics, follower_law, dt, max_cycles, **kwargs)
         eng = self.engine
         self.render_mode = render_mode
@@ -165,9 +217,7 @@ class FormationEnv(ParallelEnv, EzPickle):
         self.obs_blocks = eng.obs_blocks
         self._rng: np.random.Generator | None = None
         self._state: EngineState | None = None
-        self._renderer: Any = None
         self._trail: list[NDArray[np.float64]] = []
-        self.trail_length = 60
 
     # ------------------------------------------------------------------ spaces
     def observation_space(self, agent: str) -> spaces.Box:
@@ -202,19 +252,15 @@ class FormationEnv(ParallelEnv, EzPickle):
         self._state = self.engine.reset(self._rng, 1)
         self.agents = self.possible_agents[:]
         obs = self.engine.observe(self._state, self._rng)[0]
-        self._trail = [self._state.pos[0]]
-        if self.render_mode == "human":
-            self.render()
-        gd = float(np.max(np.linalg.norm(self._state.goal[0] - self._state.pos[0], axis=-1)))
-        info = neutral_info(gd, float(self._state.err[0]))
+        self._show(reset=True)
+        info = self._reset_info()
         return {a: obs[i] for i, a in self._index}, {a: StepInfo(info) for a in self.agents}
 
     def step(
         self, actions: dict[str, Any]
     ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
         """Advance one sample with every live leader's action (see the class docstring)."""
-        if self._state is None:
-            raise FormationError("call reset() before step()")
+        self._state_or_raise("step")
         if not self.agents:  # every agent is done: an empty step is a no-op (PettingZoo's loop), an action an error
             if actions:
                 raise FormationError("the episode is over: call reset() before step()")
@@ -228,8 +274,7 @@ class FormationEnv(ParallelEnv, EzPickle):
             raise ValueError(f"actions must be real arrays of shape {self._act_space.shape}: {exc}") from None
         if a.shape != self._act_shape:
             raise ValueError(f"each action must have shape {self._act_space.shape}, got actions of shape {a.shape[1:]}")
-        state, ob, rw, te, trn, inf = self.engine.step(self._state, a[None], self._rng)
-        self._state = state
+        self._state, ob, rw, te, trn, inf = self.engine.step(self._state, a[None], self._rng)
         o, t, tr = ob[0], bool(te[0]), bool(trn[0])
         agents = self.possible_agents
         shared = {key: val[0].item() for key, val in inf.items() if key != "control_effort"}
@@ -244,41 +289,12 @@ class FormationEnv(ParallelEnv, EzPickle):
         )
         if t or tr:
             self.agents = []
-        if self.render_mode is not None:
-            self._trail.append(state.pos[0])
-            del self._trail[: -self.trail_length]
-            if self.render_mode == "human":
-                self.render()
+        self._show()
         return out
 
     def state(self) -> NDArray[np.float32]:
         """The global state vector (``state_space``)."""
-        if self._state is None:
-            raise FormationError("call reset() before state()")
-        return self.engine.global_state(self._state)[0]
-
-    # ------------------------------------------------------------------ rendering
-    def render(self) -> NDArray[np.uint8] | None:
-        """Draw the current frame: an (H, W, 3) uint8 array (``rgb_array``), or a window (``human``)."""
-        if self.render_mode is None:
-            import warnings
-
-            warnings.warn("render() called with render_mode=None: nothing to draw", stacklevel=2)
-            return None
-        if self._state is None:
-            raise FormationError("call reset() before render()")
-        if self._renderer is None:
-            from .rendering import Renderer
-
-            self._renderer = Renderer(self.engine.d, self.render_mode, fps=self.metadata["render_fps"])
-        trail = np.stack(self._trail) if self._trail else None
-        return self._renderer.draw(self.engine.frame(self._state, 0, trail))
-
-    def close(self) -> None:
-        """Close the renderer (if one was opened)."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
+        return self.engine.global_state(self._state_or_raise("state"))[0]
 
     # ------------------------------------------------------------------ copies
     def __getstate__(self) -> dict[str, Any]:

@@ -23,10 +23,8 @@ after episode (test). A finished env is reset in the same step (SB3 convention):
 ``TimeLimit.truncated = True`` (SB3 then bootstraps its value); other slots get fresh empty dicts. The
 engine's info arrays of the last step are ``last_info`` (arrays (B,)).
 
-Gymnasium: :meth:`FormationVecEnv.to_gymnasium` (or :class:`GymnasiumFormationVecEnv`) wraps it as a
-``gymnasium.vector.VectorEnv`` with same-step auto-reset (``AutoresetMode.SAME_STEP``: ``info["final_obs"]``,
-``info["final_info"]`` (a dict of arrays over slots, as Gymnasium's ``SyncVectorEnv`` makes it) and the masks
-``info["_final_obs"]``), separate ``terminated`` / ``truncated`` arrays.
+Gymnasium: :meth:`FormationVecEnv.to_gymnasium` wraps it as a ``gymnasium.vector.VectorEnv`` with same-step
+auto-reset (:class:`GymnasiumFormationVecEnv`).
 
 Example::
 
@@ -50,7 +48,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from formation_env.core.errors import FormationError
 
-from .engine import Engine, EngineState
+from .engine import INFO_KEYS, Engine, EngineState
 
 __all__ = ["MODES", "FormationVecEnv", "GymnasiumFormationVecEnv"]
 
@@ -58,7 +56,7 @@ __all__ = ["MODES", "FormationVecEnv", "GymnasiumFormationVecEnv"]
 MODES: tuple[str, ...] = ("shared", "commander")
 
 #: Engine info entries copied into a finished slot's info dict.
-_DONE_INFO = ("success", "collision", "out_of_bounds", "formation_error", "min_clearance", "goal_distance", "time")
+_DONE_INFO = tuple(key for key in INFO_KEYS if key != "control_effort")
 
 
 class FormationVecEnv(VecEnv):
@@ -323,6 +321,3 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
     def render(self) -> NDArray[np.uint8] | None:  # type: ignore[override]
         """Env 0's frame."""
         return self.venv.render()
-
-    def close_extras(self, **kwargs: Any) -> None:
-        """Nothing to release."""

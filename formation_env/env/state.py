@@ -1,8 +1,4 @@
-"""The engine's state and one step's context: plain batched arrays, no behaviour.
-
-Every array starts with the batch dim B (VMAS style): the PettingZoo env is B = 1, the vectorised env
-B in the thousands, and both run the same :meth:`Engine.step <formation_env.env.engine.Engine.step>`.
-"""
+"""The engine's state and one step's context: plain arrays, batched over B environments, no behaviour."""
 
 from __future__ import annotations
 

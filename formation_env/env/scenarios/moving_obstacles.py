@@ -20,14 +20,10 @@ arguments):
 The team, about 3 m long and 2 m wide, cannot slip between two lanes: it must time its crossing between
 the discs' passes, shrinking (scaling) or rotating to narrow the band it sweeps, or wait for a gap.
 
-Contact: an agent touches a disc when its centre comes within ``agent_radius`` of the disc's rim, at a
-sample or along the step (the agent's motion relative to the moving disc). Success: no contact so far and,
-at one sample, every agent within ``goal_tol`` = 0.2 m of its goal position Theta_g r_i + b_g and the
-affine-image formation error below ``formation_tol`` = 0.05 m. The episode then terminates.
-
-``agents.scripted.crossing_action`` is a reference policy (shrink, wait until the whole crossing is
-predicted clear of every disc, cross, restore, go to the goal) that the tests run on seeded episodes to show
-they are solvable. The global state carries each disc's current centre, velocity and radius.
+Contact: an agent centre within ``agent_radius`` of a disc's rim, at a sample or along the step (relative to
+the moving disc). Success as in ``narrow_passage``. ``agents.scripted.crossing_action`` (shrink, wait until the
+crossing is predicted clear, cross, restore, go to the goal) shows in the tests that episodes are solvable. The
+global state carries each disc's current centre, velocity and radius.
 """
 
 from __future__ import annotations

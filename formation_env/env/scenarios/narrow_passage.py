@@ -14,14 +14,10 @@ Geometry (metres, per episode drawn uniformly from the seed's generator; ranges 
 * Goal pose: Theta_g = rotation(psi_g), psi_g in [-pi/12, pi/12], b_g with x in [3.5, 4.5],
   y in [-1.5, 1.5]: beyond the wall, the nominal shape (restored).
 
-Contact: an agent touches the wall when its centre comes within ``agent_radius`` of a
-segment or its step crosses one. Success: no contact so far and, at one sample, every agent
-within ``goal_tol`` = 0.2 m of its goal position Theta_g r_i + b_g and the affine-image
-formation error below ``formation_tol`` = 0.05 m. The episode then terminates.
-
-``agents.scripted.passage_action`` is a reference policy (move to the gap, shrink, pass, restore, go to
-the goal) used by the tests to show every episode is solvable; ``agents.planner.PassagePlanner`` the tuned
-analytic planner.
+Contact: an agent centre within ``agent_radius`` of a segment, or a step crossing one. Success (it terminates
+the episode): no contact and every agent within ``goal_tol`` = 0.2 m of its goal position Theta_g r_i + b_g, the
+formation error below ``formation_tol`` = 0.05 m. ``agents.scripted.passage_action`` (move to the gap, shrink,
+pass, restore, go to the goal) shows in the tests that every episode is solvable.
 
 Task features (the optional ``task`` observation block, per leader, m): the wall's x minus the leader's
 x, the gap centre's y minus the formation's fitted b_y, and the gap's half-width minus the formation's

@@ -8,10 +8,8 @@ Per episode (uniform draws; ranges are keyword arguments):
 * Start pose: rotation by psi0 in [-pi/12, pi/12] (3D: about z), b0 with x in [-4.5, -4], the rest
   in [-1.5, 1.5]; goal pose: rotation by psi_g in the same range, b_g with x in [4, 4.5].
 
-Gaps between obstacles are often narrower than the nominal formation: rotating, shearing or
-scaling it helps. Contact: an agent's path within ``agent_radius`` of an obstacle. Success as
-in ``narrow_passage``: every agent within 0.2 m of its goal position and formation error below
-0.05 m, with no contact; it terminates the episode.
+Gaps between obstacles are often narrower than the nominal formation: rotating, shearing or scaling it helps.
+Contact: an agent's path within ``agent_radius`` of an obstacle. Success (and its end) as in ``narrow_passage``.
 """
 
 from __future__ import annotations

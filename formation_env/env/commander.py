@@ -110,6 +110,7 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
             low = np.concatenate([low, np.full(d * d, -6.0, np.float32), eng.bounds[0].astype(np.float32)])
             high = np.concatenate([high, np.full(d * d, 6.0, np.float32), eng.bounds[1].astype(np.float32)])
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
+        self._obs_low, self._obs_high = low, high
         self._state: EngineState | None = None
         self._done = False
         self._pose: dict[str, Array] = {}
@@ -154,7 +155,7 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
         if self.action_mode == "leaders":
             return g
         extra = np.concatenate([self._theta()[0].reshape(-1), self._pose["b"][0]]).astype(np.float32)
-        return np.clip(np.concatenate([g, extra]), self.observation_space.low, self.observation_space.high)
+        return np.clip(np.concatenate([g, extra]), self._obs_low, self._obs_high)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None

@@ -470,7 +470,8 @@ class Engine:
         t = float(state.k[b] * self.dt)
         gd = float(np.max(np.linalg.norm(state.goal[b] - state.pos[b], axis=-1)))
         status = text or f"{self.scenario_name}  t={t:.1f} s  formation error {state.err[b]:.3f} m  goal {gd:.2f} m"
-        shapes = {"segments": [np.zeros((0, 2, self.d))], "circles": [np.zeros((0, self.d + 1))]}
+        d = self.d
+        shapes: dict[str, list[Array]] = {"segments": [np.zeros((0, 2, d))], "circles": [np.zeros((0, d + 1))]}
         for ob in self.obstacles:
             for key, arr in ob.shapes(state.params[ob.key][b], t, self.bounds).items():
                 shapes[key].append(arr)
@@ -499,7 +500,8 @@ class Engine:
     def select(state: EngineState, index: ArrayLike) -> EngineState:
         """The sub-batch ``index`` of ``state`` (for tests and vectorised resets)."""
         idx = np.atleast_1d(np.asarray(index))
-        fields = {f: None if v is None else v[idx] for f, v in zip(_FIELDS, state, strict=False)}
+        values: tuple[Any, ...] = state[:-1]
+        fields = {f: None if v is None else v[idx] for f, v in zip(_FIELDS, values, strict=True)}
         return _frozen(fields, {kk: vv[idx] for kk, vv in state.params.items()})
 
     @staticmethod
@@ -513,7 +515,7 @@ class Engine:
             out[rows] = val
             return out
 
-        fields = {f: put(v, w) for f, v, w in zip(_FIELDS, state, new, strict=False)}
+        fields = {f: put(v, w) for f, v, w in zip(_FIELDS, state[:-1], new[:-1], strict=True)}
         return _frozen(fields, {kk: put(vv, new.params[kk]) for kk, vv in state.params.items()})
 
 

@@ -260,7 +260,7 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
         self, actions: dict[str, Any]
     ) -> tuple[dict[str, Any], dict[str, float], dict[str, bool], dict[str, bool], dict[str, dict[str, Any]]]:
         """Advance one sample with every live leader's action (see the class docstring)."""
-        self._state_or_raise("step")
+        state = self._state_or_raise("step")
         if not self.agents:  # every agent is done: an empty step is a no-op (PettingZoo's loop), an action an error
             if actions:
                 raise FormationError("the episode is over: call reset() before step()")
@@ -274,7 +274,7 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
             raise ValueError(f"actions must be real arrays of shape {self._act_space.shape}: {exc}") from None
         if a.shape != self._act_shape:
             raise ValueError(f"each action must have shape {self._act_space.shape}, got actions of shape {a.shape[1:]}")
-        self._state, ob, rw, te, trn, inf = self.engine.step(self._state, a[None], self._rng)
+        self._state, ob, rw, te, trn, inf = self.engine.step(state, a[None], self._rng)
         o, t, tr = ob[0], bool(te[0]), bool(trn[0])
         agents = self.possible_agents
         shared = {key: val[0].item() for key, val in inf.items() if key != "control_effort"}

@@ -79,10 +79,7 @@ def resolve_dynamics(dynamics: str | LinearDynamics, d: int) -> LinearDynamics:
 
 
 def check_combination(follower_law: str, dynamics: LinearDynamics) -> None:
-    """Refuse law/dynamics pairs the env does not offer, with the reason.
-
-    ``stationary`` (eq. 17) is for single integrators only; ``linear_paper`` is not offered.
-    """
+    """Refuse law/dynamics pairs the env does not offer, with the reason."""
     if follower_law not in FOLLOWER_LAWS:
         extra = " (linear_paper is the paper's literal eq. 25, whose followers do not track)" * (
             follower_law == "linear_paper"

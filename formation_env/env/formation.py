@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 import warnings
 from typing import Any
 
@@ -18,10 +19,6 @@ from .observations import observation_table
 from .rewards import reward_table
 
 __all__ = ["FormationEnv", "neutral_info"]
-
-
-def _indent(text: str) -> str:
-    return "\n".join("    " + line for line in text.splitlines())
 
 
 def neutral_info(goal_distance: float, formation_error: float) -> StepInfo:
@@ -170,8 +167,8 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
 
     __doc__ = (
         (__doc__ or "")
-        .replace("OBSERVATION_TABLE", _indent(observation_table()))
-        .replace("REWARD_TABLE", _indent(reward_table()))
+        .replace("OBSERVATION_TABLE", textwrap.indent(observation_table(), "    "))
+        .replace("REWARD_TABLE", textwrap.indent(reward_table(), "    "))
     )
 
     metadata: dict[str, Any] = {

@@ -118,9 +118,24 @@ def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -
     for _ in range(20):
         s, _, r, *_ = eng.step(s, rng.uniform(-1, 1, (1, eng.n_l, eng.p)))
         total += r
-    expect = np.log(EPS_APPROACH + phase_distance(s0, eng.leaders)) - np.log(
-        EPS_APPROACH + phase_distance(s, eng.leaders)
-    )
+    expect = np.log(EPS_APPROACH + phase_distance(s0, eng)) - np.log(EPS_APPROACH + phase_distance(s, eng))
     np.testing.assert_allclose(total, expect, rtol=1e-9, atol=1e-12)
     at_rest_on_goal = s0._replace(pos=s0.goal, vel=np.zeros_like(s0.vel))
-    np.testing.assert_allclose(phase_distance(at_rest_on_goal, eng.leaders), 0.0)
+    np.testing.assert_allclose(phase_distance(at_rest_on_goal, eng), 0.0)
+
+
+def test_narrow_passage_route_goes_through_the_gap() -> None:
+    """Before the wall the route bends through the gap (never shorter than the straight line); aligned with the
+    gap or beyond the wall it is the straight line."""
+    eng = Engine("narrow_passage")
+    sc = eng.scenario
+    params = {"wall_x": np.array([0.0]), "gap_center": np.array([1.0]), "gap_width": np.array([1.0])}
+    goal = np.array([[[4.0, 1.0], [4.0, -2.0], [4.0, 1.0]]])
+    pos = np.array([[[-4.0, 1.0], [-4.0, -2.0], [1.0, -3.0]]])
+    d = sc.route_distance(pos, goal, params)
+    straight = np.linalg.norm(goal - pos, axis=-1)
+    np.testing.assert_allclose(d[0, [0, 2]], straight[0, [0, 2]])  # aligned with the gap; beyond the wall
+    room = 0.5 - sc.agent_radius - 0.05
+    via = np.hypot(4.0, 1.0 - room + 2.0) * 2  # down to the gap's lower usable edge and back, symmetric
+    np.testing.assert_allclose(d[0, 1], via)
+    assert d[0, 1] > straight[0, 1]

@@ -389,6 +389,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--residual", type=float, default=None, help="learn a correction of this scale on the planner")
     p.add_argument("--env-kwargs", default="", help='JSON engine arguments, e.g. {"reward_weights": {"distance": 0.2}}')
     p.add_argument("--algo-kwargs", default="", help='JSON hyperparameters over the recipe\'s, e.g. {"gamma": 0.995}')
+    p.add_argument("--policy-kwargs", default="", help='JSON SB3 policy_kwargs, e.g. {"log_std_init": -1.0}')
     p.add_argument("--eval-episodes", type=int, default=None)
     p.add_argument("--env-version", type=int, default=None, help="env version of the defaults (0, 1); default 0")
     p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
@@ -410,6 +411,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         cfg["env_kwargs"] = {**cfg.get("env_kwargs", {}), **json.loads(a.env_kwargs)}
     if a.algo_kwargs:
         cfg["algo_kwargs"] = {**cfg.get("algo_kwargs", {}), **json.loads(a.algo_kwargs)}
+    if a.policy_kwargs:
+        cfg["policy_kwargs"] = {**cfg.get("policy_kwargs", {}), **json.loads(a.policy_kwargs)}
     if a.curriculum:
         cur = tuple(float(v) for v in a.curriculum.split(":"))
         if len(cur) != 2:

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -66,24 +66,26 @@ def _distance(ctx: StepContext) -> Array:
 TAU_APPROACH, EPS_APPROACH = 1.0, 0.02
 
 
-def phase_distance(state: EngineState, leaders: NDArray[np.int64]) -> Array:
-    """Each leader's distance to its goal in phase space, sqrt(|p - p*|^2 + TAU^2 |v - v*|^2), (B, n_l), m."""
-    ep = state.pos[:, leaders] - state.goal[:, leaders]
-    ev = state.vel[:, leaders] - state.goal_vel[:, leaders]
-    return np.sqrt(np.einsum("bld,bld->bl", ep, ep) + TAU_APPROACH**2 * np.einsum("bld,bld->bl", ev, ev))
+def phase_distance(state: EngineState, engine: Any) -> Array:
+    """Each leader's distance to its goal state in phase space, sqrt(g^2 + TAU^2 |v - v*|^2), (B, n_l), m:
+    g the length of the scenario's route to the goal (``Scenario.route_distance``; straight by default)."""
+    lead = engine.leaders
+    g = engine.scenario.route_distance(state.pos[:, lead], state.goal[:, lead], state.params)
+    ev = state.vel[:, lead] - state.goal_vel[:, lead]
+    return np.sqrt(g * g + TAU_APPROACH**2 * np.einsum("bld,bld->bl", ev, ev))
 
 
 @reward_term(
     "approach",
     0.0,
     "log(eps + s_i(k)) - log(eps + s_i(k+1)), s_i the leader's phase-space distance to its goal state "
-    "sqrt(|p - p*|^2 + (1 s)^2 |v - v*|^2), eps = 0.02 m: potential shaping that rewards arriving and "
-    "coming to rest, as much for the last centimetres as for the first metres",
+    "sqrt(g^2 + (1 s)^2 |v - v*|^2), g its route's length to the goal (the scenario's, round obstacles "
+    "it knows; straight by default), eps = 0.02 m: potential shaping that rewards arriving and coming to "
+    "rest, as much for the last centimetres as for the first metres",
 )
 def _approach(ctx: StepContext) -> Array:
     assert ctx.prev is not None
-    lead = ctx.engine.leaders
-    before, after = phase_distance(ctx.prev, lead), phase_distance(ctx.state, lead)
+    before, after = phase_distance(ctx.prev, ctx.engine), phase_distance(ctx.state, ctx.engine)
     return np.log(EPS_APPROACH + before) - np.log(EPS_APPROACH + after)
 
 

@@ -249,6 +249,12 @@ class Scenario:
         """(low, high) of :meth:`task_features`' entries, each (k,)."""
         return np.zeros(0), np.zeros(0)
 
+    def route_distance(self, pos: Array, goal: Array, params: dict[str, Array]) -> Array:
+        """Length (m) of the shortest obstacle-respecting route from each position to its goal, as far as the
+        scenario knows it (the ``approach`` reward's potential): pos, goal (B, m, d) -> (B, m). Straight lines
+        by default; a scenario whose obstacles block them says how to go round."""
+        return np.linalg.norm(goal - pos, axis=-1)
+
     def is_success(self, goal_distance: Array, formation_error: Array) -> NDArray[np.bool_]:
         """Success at one sample: every agent within ``goal_tol`` of its goal and formation error below
         ``formation_tol``. goal_distance (B,) is the largest agent distance (m); returns (B,) bool."""

@@ -37,7 +37,10 @@ from ._base import Array, Draw, Scenario, check_range, rotation_2d
 if TYPE_CHECKING:
     from ..state import StepContext
 
-__all__ = ["NarrowPassage"]
+__all__ = ["ROUTE_MARGIN", "NarrowPassage"]
+
+#: Room (m) the ``approach`` reward's route keeps between an agent's disc and the gap's edges.
+ROUTE_MARGIN = 0.05
 
 
 class NarrowPassage(Scenario):
@@ -123,6 +126,18 @@ class NarrowPassage(Scenario):
         out = np.repeat(per_env[:, None, :], eng.n_l, axis=1)
         out[:, :, 0] = p["wall_x"][:, None] - pos[:, eng.leaders, 0]
         return out
+
+    def route_distance(self, pos: Array, goal: Array, params: dict[str, Array]) -> Array:
+        """Through the gap: an agent before the wall goes straight to the crossing point (x_w, y*), y* the
+        straight line's crossing clipped to the part of the gap its disc fits through with ``ROUTE_MARGIN`` m
+        to spare, then straight to its goal; beyond the wall, straight. pos, goal (B, m, 2) -> (B, m), m."""
+        xw, yc = params["wall_x"][:, None], params["gap_center"][:, None]
+        room = np.maximum(0.5 * params["gap_width"][:, None] - self.agent_radius - ROUTE_MARGIN, 0.0)
+        px, py, gx, gy = pos[..., 0], pos[..., 1], goal[..., 0], goal[..., 1]
+        frac = np.clip((xw - px) / np.maximum(gx - px, 1e-9), 0.0, 1.0)
+        ys = np.clip(py + frac * (gy - py), yc - room, yc + room)
+        via = np.hypot(xw - px, ys - py) + np.hypot(gx - xw, gy - ys)
+        return np.where(px < xw, via, np.hypot(gx - px, gy - py))
 
     def task_feature_bounds(self) -> tuple[Array, Array]:
         ext = self.bounds[1] - self.bounds[0]

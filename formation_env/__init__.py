@@ -32,7 +32,15 @@ from typing import Any
 
 __version__ = "0.1.0"
 
-__all__ = ["COMMANDER_ENTRY_POINT", "COMMANDER_ID", "MAX_EPISODE_STEPS", "SCENARIO_IDS", "register_gymnasium"]
+__all__ = [
+    "COMMANDER_ENTRY_POINT",
+    "COMMANDER_ID",
+    "COMMANDER_ID_V1",
+    "MAX_EPISODE_STEPS",
+    "SCENARIO_IDS",
+    "SCENARIO_IDS_V1",
+    "register_gymnasium",
+]
 
 #: The Gymnasium id of the commander env with the scenario as a keyword: ``gym.make(COMMANDER_ID, scenario=...)``.
 COMMANDER_ID = "formation_env/FormationCommander-v0"
@@ -56,6 +64,13 @@ SCENARIO_IDS: dict[str, str] = {
 }
 
 
+#: The same scenarios with env version 1's defaults (``formation_v1``: the learnable rewards), registered with
+#: ``kwargs={"scenario": name, "version": 1}``; :data:`COMMANDER_ID_V1` takes the scenario as a keyword.
+SCENARIO_IDS_V1: dict[str, str] = {name: env_id[: -len("-v0")] + "-v1" for name, env_id in SCENARIO_IDS.items()}
+COMMANDER_ID_V1 = "formation_env/FormationCommander-v1"
+VERSIONED_ENTRY_POINT = "formation_env.env.commander:versioned"
+
+
 def register_gymnasium(gymnasium: ModuleType | None = None) -> None:
     """Register :data:`COMMANDER_ID` and every id of :data:`SCENARIO_IDS` with Gymnasium (idempotent).
 
@@ -68,14 +83,20 @@ def register_gymnasium(gymnasium: ModuleType | None = None) -> None:
     registry = gym.registry
     if COMMANDER_ID not in registry:
         gym.register(id=COMMANDER_ID, entry_point=COMMANDER_ENTRY_POINT)
-    for scenario, env_id in SCENARIO_IDS.items():
-        if env_id not in registry:
-            gym.register(
-                id=env_id,
-                entry_point=COMMANDER_ENTRY_POINT,
-                max_episode_steps=MAX_EPISODE_STEPS,
-                kwargs={"scenario": scenario},
-            )
+    if COMMANDER_ID_V1 not in registry:
+        gym.register(id=COMMANDER_ID_V1, entry_point=VERSIONED_ENTRY_POINT, kwargs={"version": 1})
+    for ids, entry, extra in (
+        (SCENARIO_IDS, COMMANDER_ENTRY_POINT, {}),
+        (SCENARIO_IDS_V1, VERSIONED_ENTRY_POINT, {"version": 1}),
+    ):
+        for scenario, env_id in ids.items():
+            if env_id not in registry:
+                gym.register(
+                    id=env_id,
+                    entry_point=entry,
+                    max_episode_steps=MAX_EPISODE_STEPS,
+                    kwargs={"scenario": scenario, **extra},
+                )
 
 
 class _RegisterWhenGymnasiumLoads(MetaPathFinder):

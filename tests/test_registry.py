@@ -156,3 +156,39 @@ def test_require_does_not_hide_a_broken_install(tmp_path: Path, monkeypatch: pyt
         require("fe_broken_pkg", "design", "x")
     assert not isinstance(err.value, MissingExtra)
     assert err.value.name == "fe_missing_dependency_xyz"
+
+
+def test_version_1_ids_and_module_carry_the_learnable_rewards() -> None:
+    import gymnasium as gym
+
+    from formation_env import COMMANDER_ID_V1, SCENARIO_IDS_V1, formation_v1
+    from formation_env.env.versions import ENV_VERSIONS, with_version
+
+    assert set(SCENARIO_IDS_V1) == set(SCENARIO_IDS)
+    assert all(i.endswith("-v1") for i in SCENARIO_IDS_V1.values())
+    v1 = ENV_VERSIONS[1]["reward_weights"]
+    for env in (
+        gym.make(SCENARIO_IDS_V1["narrow_passage"]).unwrapped,
+        gym.make(COMMANDER_ID_V1, scenario="narrow_passage").unwrapped,
+        formation_v1.parallel_env(scenario="narrow_passage"),
+    ):
+        assert {k: env.engine.reward_weights[k] for k in v1} == v1
+    v0 = gym.make(COMMANDER_ID, scenario="narrow_passage").unwrapped.engine.reward_weights
+    assert v0["approach"] == 0.0 and v0["progress"] == 1.0  # version 0 keeps its defaults
+    mixed = formation_v1.parallel_env(scenario="hold", reward_weights={"approach": 1.0}).engine.reward_weights
+    assert mixed["approach"] == 1.0 and mixed["proximity"] == v1["proximity"]  # merged term by term
+    assert with_version(0, {"dt": 0.05}) == {"dt": 0.05}
+    with pytest.raises(ValueError, match="env version"):
+        with_version(7, {})
+
+
+def test_formation_v1_passes_the_pettingzoo_checkers() -> None:
+    import functools
+
+    from pettingzoo.test import api_test, parallel_api_test, seed_test
+
+    from formation_env import formation_v1
+
+    parallel_api_test(formation_v1.parallel_env(scenario="narrow_passage"), num_cycles=100)
+    api_test(formation_v1.env(scenario="hold"), num_cycles=50)
+    seed_test(functools.partial(formation_v1.env, scenario="moving_obstacles"), num_cycles=50)

@@ -19,8 +19,9 @@ from .control import track_targets
 from .engine import Engine, EngineState, StepInfo
 from .formation import SingleEnv
 from .scenarios._base import affine_batch, rotation_2d, rotation_3d
+from .versions import with_version
 
-__all__ = ["ACTION_MODES", "FormationCommanderEnv"]
+__all__ = ["ACTION_MODES", "FormationCommanderEnv", "versioned"]
 
 ACTION_MODES = ("leaders", "maneuver")
 Array = NDArray[np.float64]
@@ -197,3 +198,8 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
         self._done = terminated or truncated
         self._show()
         return self._obs(), float(rew[0].mean()), terminated, truncated, out
+
+
+def versioned(version: int, **kwargs: Any) -> FormationCommanderEnv:
+    """The commander env with env version ``version``'s defaults under ``kwargs`` (the ``-v1`` Gymnasium ids)."""
+    return FormationCommanderEnv(**with_version(version, kwargs))

@@ -67,26 +67,26 @@ TAU_APPROACH, EPS_APPROACH = 1.0, 0.02
 
 
 def phase_distance(state: EngineState, engine: Any) -> Array:
-    """Each leader's distance to its goal state in phase space, sqrt(g^2 + TAU^2 |v - v*|^2), (B, n_l), m:
-    g the length of the scenario's route to the goal (``Scenario.route_distance``; straight by default)."""
-    lead = engine.leaders
-    g = engine.scenario.route_distance(state.pos[:, lead], state.goal[:, lead], state.params)
-    ev = state.vel[:, lead] - state.goal_vel[:, lead]
-    return np.sqrt(g * g + TAU_APPROACH**2 * np.einsum("bld,bld->bl", ev, ev))
+    """Every agent's distance to its goal state in phase space, sqrt(g^2 + TAU^2 |v - v*|^2), (B, n), m: g the
+    length of the scenario's route to the goal (``Scenario.route_distance``; straight by default)."""
+    g = engine.scenario.route_distance(state.pos, state.goal, state.params)
+    ev = state.vel - state.goal_vel
+    return np.sqrt(g * g + TAU_APPROACH**2 * np.einsum("bnd,bnd->bn", ev, ev))
 
 
 @reward_term(
     "approach",
     0.0,
-    "log(eps + s_i(k)) - log(eps + s_i(k+1)), s_i the leader's phase-space distance to its goal state "
-    "sqrt(g^2 + (1 s)^2 |v - v*|^2), g its route's length to the goal (the scenario's, round obstacles "
-    "it knows; straight by default), eps = 0.02 m: potential shaping that rewards arriving and coming to "
-    "rest, as much for the last centimetres as for the first metres",
+    "mean over all agents (followers too) of log(eps + s_i(k)) - log(eps + s_i(k+1)), s_i the agent's "
+    "phase-space distance to its goal state sqrt(g^2 + (1 s)^2 |v - v*|^2), g its route's length to the goal "
+    "(the scenario's, round obstacles it knows; straight by default), eps = 0.02 m; shared by the team: "
+    "potential shaping that rewards the whole team arriving and coming to rest, as much for the last "
+    "centimetres as for the first metres",
 )
 def _approach(ctx: StepContext) -> Array:
     assert ctx.prev is not None
     before, after = phase_distance(ctx.prev, ctx.engine), phase_distance(ctx.state, ctx.engine)
-    return np.log(EPS_APPROACH + before) - np.log(EPS_APPROACH + after)
+    return np.mean(np.log(EPS_APPROACH + before) - np.log(EPS_APPROACH + after), axis=1)
 
 
 @reward_term("formation", 1.0, "-T e(k+1): the affine-image formation error, per second (m s)")

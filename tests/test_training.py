@@ -139,3 +139,23 @@ def test_narrow_passage_route_goes_through_the_gap() -> None:
     via = np.hypot(4.0, 1.0 - room + 2.0) * 2  # down to the gap's lower usable edge and back, symmetric
     np.testing.assert_allclose(d[0, 1], via)
     assert d[0, 1] > straight[0, 1]
+
+
+def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:
+    from train.leaders import RangeCurriculum
+
+    eng = Engine("narrow_passage")
+    final = eng.scenario.gap_width
+    cur = RangeCurriculum(eng, {"gap_width": [2.4, 3.0]}, fraction=0.5, total=1000)
+    for t, expect in ((0, (2.4, 3.0)), (250, (0.5 * (2.4 + final[0]), 0.5 * (3.0 + final[1]))), (600, final)):
+        cur.num_timesteps = t
+        cur._on_step()
+        assert eng.scenario.gap_width == pytest.approx(expect)
+        w = eng.reset(np.random.default_rng(t), 64).params["gap_width"]
+        assert expect[0] <= w.min() and w.max() <= expect[1]
+    cur.num_timesteps = 0
+    cur._on_step()
+    cur._on_training_end()
+    assert eng.scenario.gap_width == final
+    with pytest.raises(ValueError, match="not a"):
+        RangeCurriculum(eng, {"nonsense": [1, 2]}, 0.5, 10)

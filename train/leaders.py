@@ -45,6 +45,7 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor, 
 __all__ = [
     "ALGO_DEFAULTS",
     "POLICY_DEFAULTS",
+    "RangeCurriculum",
     "TRAIN_SEED_OFFSET",
     "ResidualVecEnv",
     "load_config",
@@ -81,7 +82,7 @@ SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
 #: The keys a recipe file may hold (the rest is refused, naming the key).
 CONFIG_KEYS = (
     "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
-    "curriculum", "algo_kwargs", "policy_kwargs", "env_version",
+    "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum",
 )  # fmt: skip
 
 
@@ -207,6 +208,40 @@ class ToleranceCurriculum(BaseCallback):
         self.scenario.goal_tol, self.scenario.formation_tol = self.final
 
 
+class RangeCurriculum(BaseCallback):
+    """A curriculum on a scenario's episode draws: each named range (e.g. ``gap_width``) starts at the given
+    (lo, hi) and moves linearly to the scenario's own over the first ``fraction`` of the training timesteps
+    (commander mode: the one engine of the ``FormationVecEnv``). Evaluation always uses the scenario's own.
+
+    The global state's bounds stay the scenario's own: a parameter drawn outside them is seen clipped.
+    """
+
+    def __init__(self, engine: Any, start: dict[str, Sequence[float]], fraction: float, total: int) -> None:
+        super().__init__()
+        if not 0.0 < fraction <= 1.0:
+            raise ValueError(f"range curriculum: fraction must be in (0, 1], got {fraction}")
+        self.scenario = engine.scenario
+        for key, rng in start.items():
+            if not isinstance(getattr(self.scenario, key, None), tuple) or len(rng) != 2:
+                raise ValueError(f"range curriculum: {key!r} is not a (lo, hi) range of {self.scenario.name!r}")
+        self.final = {k: tuple(getattr(self.scenario, k)) for k in start}
+        self.start = {k: (float(v[0]), float(v[1])) for k, v in start.items()}
+        self.span = max(1, int(fraction * total))
+
+    def _set(self, left: float) -> None:
+        for k, (a0, a1) in self.start.items():
+            b0, b1 = self.final[k]
+            setattr(self.scenario, k, (b0 + left * (a0 - b0), b1 + left * (a1 - b1)))
+        self.scenario.__dict__.pop("_plan", None)  # the draws read the ranges when the plan is built
+
+    def _on_step(self) -> bool:
+        self._set(max(0.0, 1.0 - self.num_timesteps / self.span))
+        return True
+
+    def _on_training_end(self) -> None:
+        self._set(0.0)
+
+
 def plot_curve(rows: Sequence[tuple[int, float, float, float]], path: Path, title: str) -> Path:
     """Training curve PNG: mean episode return, success rate and episode length (s) against timesteps.
 
@@ -256,6 +291,7 @@ def train(
     policy_kwargs: dict[str, Any] | None = None,
     config_file: str | None = None,
     env_version: int = 0,
+    range_curriculum: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -272,6 +308,8 @@ def train(
         algo_kwargs: the algorithm's hyperparameters over :data:`ALGO_DEFAULTS` (e.g. ``n_steps``, ``gamma``).
         policy_kwargs: SB3 ``policy_kwargs`` over :data:`POLICY_DEFAULTS` (e.g. ``net_arch``, ``log_std_init``).
         config_file: the recipe file these came from (recorded in the saved config).
+        range_curriculum: ``{"start": {range name: [lo, hi]}, "fraction": f}``: those episode draws start
+            at the given ranges and reach the scenario's own after ``f`` of the timesteps (:class:`RangeCurriculum`).
         env_version: the env version whose defaults ``env_kwargs`` sit over (:mod:`formation_env.env.versions`;
             1 is ``formation_v1``).
     """
@@ -327,6 +365,12 @@ def train(
             raise ValueError("--curriculum is for commander mode (one engine) only")
         callbacks.append(ToleranceCurriculum(raw.engine if hasattr(raw, "engine") else raw.venv.engine,
                                              *curriculum, int(timesteps)))  # fmt: skip
+    if range_curriculum is not None:
+        if mode != "commander":
+            raise ValueError("range_curriculum is for commander mode (one engine) only")
+        callbacks.append(RangeCurriculum(raw.engine if hasattr(raw, "engine") else raw.venv.engine,
+                                         range_curriculum["start"], float(range_curriculum["fraction"]),
+                                         int(timesteps)))  # fmt: skip
     model.learn(int(timesteps), callback=CallbackList(callbacks), progress_bar=progress_bar, tb_log_name=name)
     wall = time.time() - t0
     stem = out / name
@@ -342,6 +386,7 @@ def train(
         "n_envs": int(n_envs),
         "residual": float(residual),
         "curriculum": None if curriculum is None else list(curriculum),
+        "range_curriculum": range_curriculum,
         "env_version": int(env_version),
         "env_kwargs": env_kwargs,
         "observation": "global_state" if mode == "commander" else "leader_observation",

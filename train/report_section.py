@@ -11,7 +11,7 @@ from typing import Any
 __all__ = ["PRETRAINED", "STANDARD_SUITE", "evaluation_section"]
 
 #: The committed pretrained commander policy for ``narrow_passage``.
-PRETRAINED = Path(__file__).resolve().parent / "pretrained" / "narrow_passage_commander.zip"
+PRETRAINED = Path(__file__).resolve().parent.parent / "agents" / "pretrained" / "narrow_passage_commander.zip"
 #: The standard suite: scenario, episodes (full, quick), first seed.
 STANDARD_SUITE: dict[str, Any] = {"scenario": "narrow_passage", "episodes": 100, "quick_episodes": 20, "seed": 0}
 

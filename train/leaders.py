@@ -45,8 +45,8 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor, 
 __all__ = [
     "ALGO_DEFAULTS",
     "POLICY_DEFAULTS",
-    "RangeCurriculum",
     "TRAIN_SEED_OFFSET",
+    "RangeCurriculum",
     "ResidualVecEnv",
     "load_config",
     "main",
@@ -210,29 +210,33 @@ class ToleranceCurriculum(BaseCallback):
 
 class RangeCurriculum(BaseCallback):
     """A curriculum on a scenario's episode draws: each named range (e.g. ``gap_width``) starts at the given
-    (lo, hi) and moves linearly to the scenario's own over the first ``fraction`` of the training timesteps
-    (commander mode: the one engine of the ``FormationVecEnv``). Evaluation always uses the scenario's own.
+    (lo, hi) and moves linearly to the scenario's own over the first ``fraction`` of the training timesteps, in
+    every engine given (commander mode: the ``FormationVecEnv``'s one; shared mode: each copy's). Evaluation
+    always uses the scenario's own ranges.
 
-    The global state's bounds stay the scenario's own: a parameter drawn outside them is seen clipped.
+    The global state's and observations' bounds stay the scenario's own: a parameter drawn outside them is
+    seen clipped.
     """
 
-    def __init__(self, engine: Any, start: dict[str, Sequence[float]], fraction: float, total: int) -> None:
+    def __init__(self, engines: Any, start: dict[str, Sequence[float]], fraction: float, total: int) -> None:
         super().__init__()
         if not 0.0 < fraction <= 1.0:
             raise ValueError(f"range curriculum: fraction must be in (0, 1], got {fraction}")
-        self.scenario = engine.scenario
+        self.scenarios = [e.scenario for e in (engines if isinstance(engines, (list, tuple)) else [engines])]
+        first = self.scenarios[0]
         for key, rng in start.items():
-            if not isinstance(getattr(self.scenario, key, None), tuple) or len(rng) != 2:
-                raise ValueError(f"range curriculum: {key!r} is not a (lo, hi) range of {self.scenario.name!r}")
-        self.final = {k: tuple(getattr(self.scenario, k)) for k in start}
+            if not isinstance(getattr(first, key, None), tuple) or len(rng) != 2:
+                raise ValueError(f"range curriculum: {key!r} is not a (lo, hi) range of {first.name!r}")
+        self.final = {k: tuple(getattr(first, k)) for k in start}
         self.start = {k: (float(v[0]), float(v[1])) for k, v in start.items()}
         self.span = max(1, int(fraction * total))
 
     def _set(self, left: float) -> None:
         for k, (a0, a1) in self.start.items():
             b0, b1 = self.final[k]
-            setattr(self.scenario, k, (b0 + left * (a0 - b0), b1 + left * (a1 - b1)))
-        self.scenario.__dict__.pop("_plan", None)  # the draws read the ranges when the plan is built
+            for sc in self.scenarios:
+                setattr(sc, k, (b0 + left * (a0 - b0), b1 + left * (a1 - b1)))
+                sc.__dict__.pop("_plan", None)  # the draws read the ranges when the plan is built
 
     def _on_step(self) -> bool:
         self._set(max(0.0, 1.0 - self.num_timesteps / self.span))
@@ -366,11 +370,10 @@ def train(
         callbacks.append(ToleranceCurriculum(raw.engine if hasattr(raw, "engine") else raw.venv.engine,
                                              *curriculum, int(timesteps)))  # fmt: skip
     if range_curriculum is not None:
-        if mode != "commander":
-            raise ValueError("range_curriculum is for commander mode (one engine) only")
-        callbacks.append(RangeCurriculum(raw.engine if hasattr(raw, "engine") else raw.venv.engine,
-                                         range_curriculum["start"], float(range_curriculum["fraction"]),
-                                         int(timesteps)))  # fmt: skip
+        base = raw.venv if isinstance(raw, ResidualVecEnv) else raw
+        engines = [base.engine] if mode == "commander" else [e.par_env.engine for e in base.envs]
+        start, fraction = range_curriculum["start"], float(range_curriculum["fraction"])
+        callbacks.append(RangeCurriculum(engines, start, fraction, int(timesteps)))
     model.learn(int(timesteps), callback=CallbackList(callbacks), progress_bar=progress_bar, tb_log_name=name)
     wall = time.time() - t0
     stem = out / name

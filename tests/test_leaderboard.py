@@ -158,3 +158,12 @@ def test_recipe_run_is_reproducible_and_the_leaderboard_reads_it(tmp_path: Path,
     assert rows["ppo_shared"]["metrics"] is None
     assert rows["analytic"]["metrics"]["success_rate"] == 1.0
     assert "## hold" in md.read_text()
+
+
+def test_readme_shows_the_leaderboards_table() -> None:
+    root = Path(__file__).resolve().parent.parent
+    doc = (root / "docs" / "leaderboard.md").read_text()
+    table = doc.split("## Summary", 1)[1].strip().splitlines()
+    assert table[0].startswith("| scenario |") and len(table) == 2 + len(REGISTRY)
+    readme = (root / "README.md").read_text()
+    assert "\n".join(table) in readme

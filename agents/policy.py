@@ -29,9 +29,12 @@ from formation_env.env.engine import Engine, EngineState
 
 from .planner import make_planner
 
-__all__ = ["AnalyticPolicy", "LearnedPolicy", "Policy", "RandomPolicy", "load_policy"]
+__all__ = ["POLICY_DIR", "AnalyticPolicy", "LearnedPolicy", "Policy", "RandomPolicy", "load_policy"]
 
 Array = NDArray[np.float64]
+
+#: The shipped policies' folder (``agents/pretrained/``).
+POLICY_DIR = Path(__file__).resolve().parent / "pretrained"
 
 
 def _engine_of(env: Any) -> Engine:

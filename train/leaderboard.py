@@ -30,6 +30,7 @@ from typing import Any
 import numpy as np
 
 from agents.bounds import time_lower_bound_seeds
+from agents.policy import POLICY_DIR
 from formation_env.env.scenarios import REGISTRY
 
 from .evaluate import _finite, evaluate, make_engine
@@ -46,7 +47,7 @@ LEARNED: dict[str, tuple[str, str]] = {
 ENTRIES: tuple[str, ...] = ("random", "analytic", *LEARNED)
 #: Metrics of every entry (``evaluate``'s, with the time bound).
 SHOWN = ("success_rate", "collision_rate", "time_to_goal", "time_lower_bound", "mean_formation_err")
-PRETRAINED = Path(__file__).resolve().parent.parent / "agents" / "pretrained"
+PRETRAINED = POLICY_DIR
 
 
 def find_policies(folder: str | Path, scenario: str, entry: str) -> list[Path]:
@@ -195,3 +196,9 @@ def run_cli(args: argparse.Namespace) -> int:
         print(summary_table(board))
         print(f"written to {args.out}")
     return 0
+
+
+if __name__ == "__main__":
+    import sys
+
+    sys.exit(main())

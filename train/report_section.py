@@ -8,10 +8,12 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from agents.policy import POLICY_DIR
+
 __all__ = ["PRETRAINED", "STANDARD_SUITE", "evaluation_section"]
 
 #: The committed pretrained commander policy for ``narrow_passage``.
-PRETRAINED = Path(__file__).resolve().parent.parent / "agents" / "pretrained" / "narrow_passage_commander.zip"
+PRETRAINED = POLICY_DIR / "narrow_passage_commander.zip"
 #: The standard suite: scenario, episodes (full, quick), first seed.
 STANDARD_SUITE: dict[str, Any] = {"scenario": "narrow_passage", "episodes": 100, "quick_episodes": 20, "seed": 0}
 

@@ -14,13 +14,15 @@ Examples::
 Outputs in ``--out``: ``checkpoint/`` (``Algorithm.save_to_path``; ``formation-env evaluate --policy
 <out>/checkpoint`` evaluates it), ``config.json`` (everything needed to rebuild the env) and ``metrics.json``.
 With ``--num-env-runners 0`` (the default of ``--smoke``) sampling runs in the driver and the same seed gives the
-same metrics in every process; with remote runners the order in which their samples arrive can change a run.
+same metrics in every process (the script runs itself with ``PYTHONHASHSEED=0``: RLlib iterates sets of
+ids); with remote runners the order in which their samples arrive can change a run.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -148,4 +150,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
 
 if __name__ == "__main__":
+    if os.environ.get("PYTHONHASHSEED") != "0":
+        # RLlib iterates sets of agent and module ids: with Python's per-process string hashing their order, and
+        # with it a run, changes from process to process. Run again with hashing fixed (Ray's workers inherit it).
+        os.execve(sys.executable, [sys.executable, "-m", "train.rllib", *sys.argv[1:]],
+                  {**os.environ, "PYTHONHASHSEED": "0"})  # fmt: skip
     main()

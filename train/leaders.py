@@ -42,6 +42,8 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor, VecNormalize
 
+from .recipes import load_recipe
+
 __all__ = [
     "ALGO_DEFAULTS",
     "POLICY_DEFAULTS",
@@ -88,17 +90,7 @@ CONFIG_KEYS = (
 
 def load_config(path: str | Path) -> dict[str, Any]:
     """A training recipe (YAML) as a dict of :func:`train` arguments; unknown keys raise ValueError."""
-    import yaml
-
-    p = Path(path)
-    if not p.exists():
-        raise FileNotFoundError(f"--config: no recipe file at {p}")
-    cfg = yaml.safe_load(p.read_text()) or {}
-    if not isinstance(cfg, dict):
-        raise ValueError(f"--config: {p} must hold a mapping of training arguments, got {type(cfg).__name__}")
-    unknown = sorted(set(cfg) - set(CONFIG_KEYS))
-    if unknown:
-        raise ValueError(f"--config: {p} has unknown keys {unknown}; allowed: {list(CONFIG_KEYS)}")
+    cfg = load_recipe(path, CONFIG_KEYS)
     if "curriculum" in cfg and cfg["curriculum"] is not None:
         cfg["curriculum"] = tuple(float(v) for v in cfg["curriculum"])
     return cfg

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from formation_env.env.engine import Engine, EngineState
+from formation_env.env.maneuver import Pose, PoseCommand
 
 from .planner import make_planner
 
@@ -147,7 +148,9 @@ class LearnedPolicy(Policy):
     ``<stem>_vecnormalize.pkl``, ``<stem>_config.json`` side by side).
 
     ``config["mode"]``: ``"commander"`` (observation = global state, action = all leaders, (n_l p,))
-    or ``"shared"`` (one policy per leader on its own observation, action (p,)).
+    or ``"shared"`` (one policy per leader on its own observation, action (p,)). A commander trained with
+    ``config["action_mode"] = "maneuver"`` commands pose rates (:mod:`formation_env.env.maneuver`): the
+    commanded poses are its memory, started afresh for every episode at its first sample (k = 0).
     """
 
     def __init__(self, model: Any, vecnorm: Any | None, config: dict[str, Any], engine: Engine | None = None) -> None:
@@ -159,6 +162,9 @@ class LearnedPolicy(Policy):
         self._planner: Any = None
         self.name = str(config.get("name", f"{config.get('algo', 'learned')}_{self.mode}"))
         self._engine = engine
+        self.maneuver = config.get("action_mode", "leaders") == "maneuver"
+        self._command: PoseCommand | None = None
+        self._pose: Pose | None = None
 
     @property
     def engine(self) -> Engine:  # type: ignore[override]
@@ -217,8 +223,24 @@ class LearnedPolicy(Policy):
             a = np.clip(self._plan(eng, decode_state(eng, obs)) + self.residual * a, -1.0, 1.0).astype(np.float32)
         return a
 
+    def _maneuver(self, engine: Engine, state: EngineState) -> Array:
+        """Leader actions (B, n_l, p) of a pose-rate commander: its poses advance by its action on the global
+        state and the commanded pose; episodes at k = 0 start a fresh pose."""
+        if self._command is None or self._command.engine is not engine:
+            self._command, self._pose = PoseCommand(engine), None
+        fresh = np.flatnonzero(state.k == 0)
+        if self._pose is None or self._pose.b.shape[0] != state.batch_size:
+            self._pose = self._command.reset(state)
+        elif fresh.size:
+            self._pose = self._pose.replace_rows(fresh, self._command.reset(Engine.select(state, fresh)))
+        obs = np.concatenate([engine.global_state(state), self._command.observe(self._pose)], axis=1)
+        self._pose, a = self._command.step(state, self._pose, self._raw(obs.astype(np.float32)).astype(np.float64))
+        return a
+
     def act_engine(self, engine: Engine, state: EngineState, obs: Any = None) -> Array:
         B = state.batch_size
+        if self.mode == "commander" and self.maneuver:
+            return self._maneuver(engine, state)
         if self.mode == "commander":
             a64 = self._raw(engine.global_state(state)).astype(np.float64)
             if self.residual > 0:

@@ -82,14 +82,14 @@ def test_maneuver_mode_scales_the_formation():
     a = np.zeros(env.action_space.shape, np.float32)
     a[3] = -1.0  # log-scale rate of axis y
     theta0 = env.engine.affine.fit(env._state.pos)[0][0]
-    s0 = env._pose["s"][0].copy()
+    s0 = env._pose.s[0].copy()
     for _ in range(30):
         _, _, term, _, info = env.step(a)
         assert not term
     theta = env.engine.affine.fit(env._state.pos)[0][0]
     assert np.linalg.norm(theta[:, 1]) < 0.5 * np.linalg.norm(theta0[:, 1])
     assert info["formation_error"] < 0.05
-    np.testing.assert_allclose(env._pose["s"][0] / s0, [1.0, np.exp(-0.5 * 0.1 * 30)], rtol=1e-9)
+    np.testing.assert_allclose(env._pose.s[0] / s0, [1.0, np.exp(-0.5 * 0.1 * 30)], rtol=1e-9)
 
 
 def test_bad_arguments_and_actions():

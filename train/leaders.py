@@ -84,7 +84,7 @@ SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
 #: The keys a recipe file may hold (the rest is refused, naming the key).
 CONFIG_KEYS = (
     "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
-    "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum",
+    "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum", "action_mode",
 )  # fmt: skip
 
 
@@ -123,13 +123,23 @@ class ResidualVecEnv(VecEnvWrapper):
 
 
 def make_venv(
-    mode: str, scenario: str, n_envs: int, seed: int, env_kwargs: dict[str, Any], residual: float = 0.0
+    mode: str,
+    scenario: str,
+    n_envs: int,
+    seed: int,
+    env_kwargs: dict[str, Any],
+    residual: float = 0.0,
+    action_mode: str = "leaders",
 ) -> VecEnv:
     """The raw (un-normalised) training VecEnv of ``mode``, seeded with ``seed``."""
+    if action_mode != "leaders" and (mode != "commander" or residual > 0):
+        raise ValueError(f"action_mode {action_mode!r} is for commander mode without --residual")
     if mode == "commander":
         from formation_env.env.vector import FormationVecEnv
 
-        venv: VecEnv = FormationVecEnv(scenario, num_envs=n_envs, mode="commander", seed=seed, **env_kwargs)
+        venv: VecEnv = FormationVecEnv(
+            scenario, num_envs=n_envs, mode="commander", seed=seed, action_mode=action_mode, **env_kwargs
+        )
         if residual > 0:
             venv = ResidualVecEnv(venv, residual)
         return venv
@@ -288,6 +298,7 @@ def train(
     config_file: str | None = None,
     env_version: int = 0,
     range_curriculum: dict[str, Any] | None = None,
+    action_mode: str = "leaders",
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -323,7 +334,7 @@ def train(
         n_envs = min(n_envs, 4)
     name = name or f"{scenario}_{mode}"
     t0 = time.time()
-    raw = make_venv(mode, scenario, n_envs, TRAIN_SEED_OFFSET + seed, env_kwargs, residual)
+    raw = make_venv(mode, scenario, n_envs, TRAIN_SEED_OFFSET + seed, env_kwargs, residual, action_mode)
     venv = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
     pk: dict[str, Any] = {**POLICY_DEFAULTS.get(algo, {}), **(policy_kwargs or {})}
     if algo == "ppo" and residual > 0:
@@ -375,6 +386,7 @@ def train(
         "name": f"{algo}_{mode}" + ("_residual" if residual > 0 else ""),
         "algo": algo,
         "mode": mode,
+        "action_mode": action_mode,
         "scenario": scenario,
         "timesteps": int(timesteps),
         "seed": int(seed),

@@ -15,16 +15,14 @@ from numpy.typing import NDArray
 
 from formation_env.core.errors import FormationError
 
-from .control import track_targets
 from .engine import Engine, EngineState, StepInfo
 from .formation import SingleEnv
-from .scenarios._base import affine_batch, rotation_2d, rotation_3d
+from .maneuver import Pose, PoseCommand
 from .versions import with_version
 
 __all__ = ["ACTION_MODES", "FormationCommanderEnv", "versioned"]
 
 ACTION_MODES = ("leaders", "maneuver")
-Array = NDArray[np.float64]
 
 
 class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.float32]]):
@@ -94,69 +92,29 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
         self.engine = eng = Engine(scenario, **kwargs)
         self.action_mode = action_mode
         self.render_mode = render_mode
-        d = eng.d
-        self.rates = np.array([pose_speed, scale_rate, rotation_rate, shear_rate], dtype=np.float64)
-        if not (np.all(np.isfinite(self.rates)) and np.all(self.rates > 0)):
-            raise FormationError(
-                f"pose_speed, scale_rate, rotation_rate, shear_rate must be positive, got {self.rates}"
-            )
-        self.scale_range = (float(scale_range[0]), float(scale_range[1]))
-        if not 0 < self.scale_range[0] < 1 < self.scale_range[1]:
-            raise FormationError(f"scale_range must satisfy 0 < lo < 1 < hi, got {scale_range}")
-        self._iu = np.triu_indices(d, 1)
+        self.command = (
+            PoseCommand(eng, pose_speed=pose_speed, scale_rate=scale_rate, rotation_rate=rotation_rate,
+                        shear_rate=shear_rate, scale_range=scale_range)
+            if action_mode == "maneuver" else None
+        )  # fmt: skip
         low, high = eng.state_low, eng.state_high
-        n_act = eng.n_l * eng.p if action_mode == "leaders" else d * (d + 1)
+        n_act = eng.n_l * eng.p if self.command is None else self.command.action_dim
         self.action_space = spaces.Box(-1.0, 1.0, (n_act,), dtype=np.float32)
-        if action_mode == "maneuver":
-            low = np.concatenate([low, np.full(d * d, -6.0, np.float32), eng.bounds[0].astype(np.float32)])
-            high = np.concatenate([high, np.full(d * d, 6.0, np.float32), eng.bounds[1].astype(np.float32)])
+        if self.command is not None:
+            low = np.concatenate([low, self.command.obs_low])
+            high = np.concatenate([high, self.command.obs_high])
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        self._obs_low, self._obs_high = low, high
         self._state: EngineState | None = None
         self._done = False
-        self._pose: dict[str, Array] = {}
-
-    # ------------------------------------------------------------------ pose (maneuver mode), batched
-    def _theta(self) -> Array:
-        p = self._pose
-        u = np.eye(self.engine.d) + p["H"]
-        return p["R"] @ (u * p["s"][:, None, :])
-
-    def _init_pose(self, state: EngineState) -> None:
-        theta, b = self.engine.affine.fit(state.pos)
-        q, r = np.linalg.qr(theta)
-        sign = np.sign(np.diagonal(r, axis1=-2, axis2=-1))
-        sign[sign == 0] = 1.0
-        q, r = q * sign[:, None, :], r * sign[:, :, None]
-        s = np.clip(np.diagonal(r, axis1=-2, axis2=-1), *self.scale_range)
-        H = np.triu(r / np.diagonal(r, axis1=-2, axis2=-1)[:, None, :], 1)
-        self._pose = {"R": q, "s": s, "H": np.clip(H, -1.0, 1.0), "b": b}
-
-    def _advance_pose(self, a: Array) -> None:
-        d, dt, p = self.engine.d, self.engine.dt, self._pose
-        v, sc, rot, sh = np.split(a, [d, 2 * d, 2 * d + len(self._iu[0])], axis=-1)
-        lo, hi = self.engine.bounds
-        p["b"] = np.clip(p["b"] + self.rates[0] * dt * v, lo, hi)
-        p["s"] = np.clip(p["s"] * np.exp(self.rates[1] * dt * sc), *self.scale_range)
-        ang = self.rates[2] * dt * rot
-        if d == 2:
-            step = rotation_2d(ang[:, 0])
-        else:
-            norm = np.linalg.norm(ang, axis=-1)
-            axis = np.where(norm[:, None] > 0, ang, np.array([0.0, 0.0, 1.0]))
-            step = rotation_3d(axis, norm)
-        p["R"] = step @ p["R"]
-        i, j = self._iu
-        p["H"][:, i, j] = np.clip(p["H"][:, i, j] + self.rates[3] * dt * sh, -1.0, 1.0)
+        self._pose: Pose | None = None
 
     # ------------------------------------------------------------------ gym API
     def _obs(self) -> NDArray[np.float32]:
         """The observation of the current state."""
         g = self.engine.global_state(self._state_or_raise("step"))[0]
-        if self.action_mode == "leaders":
+        if self.command is None or self._pose is None:
             return g
-        extra = np.concatenate([self._theta()[0].reshape(-1), self._pose["b"][0]]).astype(np.float32)
-        return np.clip(np.concatenate([g, extra]), self._obs_low, self._obs_high)
+        return np.concatenate([g, self.command.observe(self._pose)[0].astype(np.float32)])
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -164,8 +122,8 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
         super().reset(seed=seed)
         self._state = self.engine.reset(self.np_random, 1)
         self._done = False
-        if self.action_mode == "maneuver":
-            self._init_pose(self._state)
+        if self.command is not None:
+            self._pose = self.command.reset(self._state)
         self._show(reset=True)
         return self._obs(), self._reset_info()
 
@@ -180,17 +138,10 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
             raise ValueError(f"action must be a real array of shape {self.action_space.shape}: {exc}") from None
         if a.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
-        if self.action_mode == "leaders":
+        if self.command is None or self._pose is None:
             leader_a = a.reshape(1, eng.n_l, eng.p)
         else:
-            if not np.all(np.isfinite(a)):
-                raise ValueError(f"action holds NaN or inf: {a.tolist()}; the state is unchanged")
-            a = np.clip(a, -1.0, 1.0)[None]
-            rl = eng.fw.positions[eng.leaders]
-            before = affine_batch(rl, self._theta(), self._pose["b"])
-            self._advance_pose(a)
-            after = affine_batch(rl, self._theta(), self._pose["b"])
-            leader_a = track_targets(eng, state, after, (after - before) / eng.dt)
+            self._pose, leader_a = self.command.step(state, self._pose, a[None])
         self._state, _, rew, term, trunc, inf = eng.step(state, leader_a, self.np_random)
         out = StepInfo({key: val[0].item() for key, val in inf.items() if key != "control_effort"})
         out["control_effort"] = float(inf["control_effort"][0].sum())

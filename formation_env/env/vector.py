@@ -9,12 +9,14 @@ mode          slots           observation of a slot                        actio
 ============  ==============  ===========================================  ==========================
 ``shared``    B x n_l         one leader's observation (``obs_dim``,)      that leader's (p,) in [-1, 1]
 ``commander`` B               the global state (``state_dim``,)            every leader's (n_l p,)
+``commander`` B               the global state, Theta_c, b_c               pose rates (d (d + 1),)
++ maneuver
 ============  ==============  ===========================================  ==========================
 
 So ``FormationVecEnv(num_envs=1024, mode="shared")`` has ``num_envs`` = 3,072 slots with 3 leaders (SB3's
 ``num_envs`` counts slots; ``n_envs`` is B). Slot ``b * n_l + j`` in ``shared`` mode is leader j of env b (one
-policy for every leader, parameter sharing). The ``commander`` slot is ``FormationCommander-v0`` with
-``action_mode="leaders"``: its reward is the mean of the leaders' rewards.
+policy for every leader, parameter sharing). The ``commander`` slot is ``FormationCommander-v0`` with the
+same ``action_mode``: its reward is the mean of the leaders' rewards.
 
 Seeding and auto-reset: env b draws its episodes from its own generator ``np.random.default_rng(seed + b)``,
 so env b of the batch replays the single env reset with ``seed + b`` and given the same actions, episode
@@ -49,6 +51,7 @@ from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 from formation_env.core.errors import FormationError
 
 from .engine import INFO_KEYS, Engine, EngineState
+from .maneuver import Pose, PoseCommand
 
 __all__ = ["MODES", "FormationVecEnv", "GymnasiumFormationVecEnv"]
 
@@ -68,6 +71,10 @@ class FormationVecEnv(VecEnv):
         mode: ``"shared"`` (one slot per leader) or ``"commander"`` (one slot per env).
         seed: seed of the first reset (env b gets ``seed + b``); None draws fresh entropy.
         engine: an existing ``Engine`` to step (then ``env_kwargs`` must be empty).
+        action_mode: ``"leaders"`` (every leader's action) or, in ``commander`` mode, ``"maneuver"``: pose rates
+            of the whole team (:mod:`formation_env.env.maneuver`; the slot's observation is the global state
+            followed by the commanded Theta_c and b_c, as ``FormationCommander-v0``).
+        maneuver_kwargs: the :class:`~formation_env.env.maneuver.PoseCommand` rates and scale range.
         **env_kwargs: the ``Engine`` arguments (dynamics, follower_law, dt, max_cycles, framework, ...).
 
     Attributes:
@@ -88,6 +95,8 @@ class FormationVecEnv(VecEnv):
         *,
         engine: Engine | None = None,
         render_mode: str | None = None,
+        action_mode: str = "leaders",
+        maneuver_kwargs: dict[str, Any] | None = None,
         **env_kwargs: Any,
     ) -> None:
         if mode not in MODES:
@@ -100,7 +109,13 @@ class FormationVecEnv(VecEnv):
             raise TypeError(f"pass either engine= or engine keyword arguments, not both (got {sorted(env_kwargs)})")
         if render_mode not in (None, "rgb_array"):
             raise FormationError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if action_mode not in ("leaders", "maneuver") or (action_mode == "maneuver" and mode != "commander"):
+            raise FormationError(f"action_mode must be 'leaders', or 'maneuver' in commander mode, got {action_mode!r}")
+        if maneuver_kwargs and action_mode != "maneuver":
+            raise TypeError("maneuver_kwargs is for action_mode='maneuver' only")
         self.engine = eng = engine if engine is not None else Engine(scenario, **env_kwargs)
+        self.command = PoseCommand(eng, **(maneuver_kwargs or {})) if action_mode == "maneuver" else None
+        self.pose: Pose | None = None
         self.mode = mode
         self.n_envs = B = int(num_envs)
         self.n_l, self.p = eng.n_l, eng.p
@@ -108,9 +123,14 @@ class FormationVecEnv(VecEnv):
         if mode == "shared":
             obs_space = spaces.Box(eng.obs_low, eng.obs_high, dtype=np.float32)
             act_space = spaces.Box(-1.0, 1.0, (eng.p,), dtype=np.float32)
-        else:
+        elif self.command is None:
             obs_space = spaces.Box(eng.state_low, eng.state_high, dtype=np.float32)
             act_space = spaces.Box(-1.0, 1.0, (eng.n_l * eng.p,), dtype=np.float32)
+        else:
+            low = np.concatenate([eng.state_low, self.command.obs_low])
+            high = np.concatenate([eng.state_high, self.command.obs_high])
+            obs_space = spaces.Box(low, high, dtype=np.float32)
+            act_space = spaces.Box(-1.0, 1.0, (self.command.action_dim,), dtype=np.float32)
         self._per_env = eng.n_l if mode == "shared" else 1
         super().__init__(B * self._per_env, obs_space, act_space)
         self._next_seed: int | None = None if seed is None else int(seed)
@@ -122,12 +142,19 @@ class FormationVecEnv(VecEnv):
         self._renderer: Any = None
 
     def _observe(
-        self, state: EngineState, leader_obs: NDArray[np.float32] | None = None, rngs: Any = None
+        self,
+        state: EngineState,
+        leader_obs: NDArray[np.float32] | None = None,
+        rngs: Any = None,
+        pose: Pose | None = None,
     ) -> NDArray[np.float32]:
         """Slot observations (num_envs, obs dim) of ``state`` (``leader_obs``: the step's, if at hand; ``rngs``: the
-        envs' generators, for observation noise)."""
+        envs' generators, for observation noise; ``pose``: the commanded poses in ``maneuver`` mode)."""
         if self.mode == "commander":
-            return self.engine.global_state(state)
+            g = self.engine.global_state(state)
+            if self.command is None or pose is None:
+                return g
+            return np.concatenate([g, self.command.observe(pose).astype(np.float32)], axis=1)
         lo = self.engine.observe(state, rngs) if leader_obs is None else leader_obs
         return lo.reshape(state.batch_size * self.n_l, -1)
 
@@ -152,10 +179,11 @@ class FormationVecEnv(VecEnv):
         elif not self._rngs:
             self._rngs = [np.random.default_rng(s) for s in np.random.SeedSequence().spawn(B)]
         self.state = self.engine.reset_each(self._rngs)
+        self.pose = None if self.command is None else self.command.reset(self.state)
         self._actions = None
         self.reset_infos = [{} for _ in range(self.num_envs)]
         self._reset_options()
-        return self._observe(self.state, rngs=self._rngs)
+        return self._observe(self.state, rngs=self._rngs, pose=self.pose)
 
     def step_async(self, actions: ArrayLike) -> None:
         """Check and store the actions of every slot: (num_envs, p) shared, (num_envs, n_l p) commander."""
@@ -169,7 +197,10 @@ class FormationVecEnv(VecEnv):
             raise TypeError(f"actions must be a real array of shape {expect}: {exc}") from None
         if a.shape != expect:
             raise FormationError(f"actions must have shape {expect} (slots, action dim), got {a.shape}")
-        a = self.engine.check_actions(a.reshape(self.n_envs, self.n_l, self.p), self.n_envs)
+        if self.command is None:
+            a = self.engine.check_actions(a.reshape(self.n_envs, self.n_l, self.p), self.n_envs)
+        elif not np.all(np.isfinite(a)):
+            raise ValueError("maneuver actions hold NaN or inf; the state is unchanged")
         self._actions = a
 
     def _step_slots(
@@ -183,9 +214,12 @@ class FormationVecEnv(VecEnv):
         assert self.state is not None
         a, self._actions = self._actions, None
         k = self._per_env
+        pose = self.pose
+        if self.command is not None and pose is not None:
+            pose, a = self.command.step(self.state, pose, a)
         state, lobs, rew, term, trunc, info = self.engine.step(self.state, a, self._rngs)
         self.last_info, self.last_terminated, self.last_truncated = info, term, trunc
-        obs = self._observe(state, lobs)
+        obs = self._observe(state, lobs, pose=pose)
         rews = (rew.reshape(-1) if k > 1 else rew.mean(axis=1)).astype(np.float32)
         done_env = term | trunc
         dones = np.repeat(done_env, k) if k > 1 else done_env.copy()
@@ -194,8 +228,12 @@ class FormationVecEnv(VecEnv):
         if envs.size:
             fresh = self.engine.reset_each([self._rngs[b] for b in envs.tolist()])
             state = Engine.replace_rows(state, envs, fresh)
-            obs[self._slots(envs)] = self._observe(fresh, rngs=[self._rngs[b] for b in envs.tolist()])
-        self.state = state
+            fresh_pose = None
+            if self.command is not None and pose is not None:
+                fresh_pose = self.command.reset(fresh)
+                pose = pose.replace_rows(envs, fresh_pose)
+            obs[self._slots(envs)] = self._observe(fresh, rngs=[self._rngs[b] for b in envs.tolist()], pose=fresh_pose)
+        self.state, self.pose = state, pose
         return obs, rews, dones, envs, final
 
     def step_wait(self) -> tuple[NDArray[np.float32], NDArray[np.float32], NDArray[np.bool_], list[dict[str, Any]]]:

@@ -40,6 +40,30 @@ def test_smoke_train_save_load_evaluate(tmp_path: Path, mode: str) -> None:
 
 
 @pytest.mark.slow
+def test_maneuver_commander_trains_and_evaluates(tmp_path: Path) -> None:
+    """A pose-rate commander: trained on the batched env, it acts through its own commanded poses."""
+    cfg = train("ppo", "commander", "hold", 512, seed=1, out=tmp_path, smoke=True, n_envs=2, action_mode="maneuver")
+    assert cfg["action_mode"] == "maneuver"
+    eng = Engine("hold")
+    pol = load_policy(tmp_path / "hold_commander.zip", eng)
+    assert isinstance(pol, LearnedPolicy) and pol.maneuver
+    state = reset_paired(eng, [0, 1, 2])
+    a = pol.act_engine(eng, state)
+    assert a.shape == (3, eng.n_l, eng.p) and np.all(np.abs(a) <= 1.0)
+    assert pol._pose is not None and pol._pose.b.shape == (3, eng.d)
+
+
+def test_maneuver_actions_only_for_commanders() -> None:
+    from formation_env.core.errors import FormationError
+    from formation_env.env.vector import FormationVecEnv
+
+    with pytest.raises(FormationError, match="action_mode"):
+        FormationVecEnv("hold", num_envs=2, mode="shared", action_mode="maneuver")
+    with pytest.raises(TypeError, match="maneuver_kwargs"):
+        FormationVecEnv("hold", num_envs=2, mode="commander", maneuver_kwargs={"pose_speed": 2.0})
+
+
+@pytest.mark.slow
 def test_same_seed_same_weights(tmp_path: Path) -> None:
     kw = {"smoke": True, "n_envs": 2, "residual": 0.5, "eval_episodes": 1}
     train("ppo", "commander", "narrow_passage", 256, seed=7, out=tmp_path / "a", **kw)

@@ -78,11 +78,14 @@ def test_shared_mode_replays_the_parallel_env(scenario, kwargs):
     assert n_cut >= 1  # and time-limit cuts
 
 
-def test_commander_mode_replays_the_commander_env():
+@pytest.mark.parametrize("action_mode", ["leaders", "maneuver"])
+def test_commander_mode_replays_the_commander_env(action_mode):
     B, seed = 4, 5
-    venv = FormationVecEnv("narrow_passage", num_envs=B, mode="commander", seed=seed, max_cycles=20)
+    venv = FormationVecEnv(
+        "narrow_passage", num_envs=B, mode="commander", seed=seed, max_cycles=20, action_mode=action_mode
+    )
     obs = venv.reset()
-    singles = [FormationCommanderEnv("narrow_passage", max_cycles=20) for _ in range(B)]
+    singles = [FormationCommanderEnv("narrow_passage", action_mode, max_cycles=20) for _ in range(B)]
     assert venv.observation_space == singles[0].observation_space
     assert venv.action_space == singles[0].action_space
     for b, env in enumerate(singles):

@@ -183,3 +183,14 @@ def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:
     assert eng.scenario.gap_width == final
     with pytest.raises(ValueError, match="not a"):
         RangeCurriculum(eng, {"nonsense": [1, 2]}, 0.5, 10)
+
+
+@pytest.mark.parametrize("flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum"])
+def test_json_flags_refuse_what_is_not_a_json_object(flag: str, capsys) -> None:
+    from train.leaders import main as leaders_main
+
+    for bad in ("{bad", "[1, 2]"):
+        with pytest.raises(SystemExit) as exc:
+            leaders_main([flag, bad, "--smoke"])
+        assert exc.value.code == 2
+        assert f"{flag} must be a JSON object" in capsys.readouterr().err

@@ -428,6 +428,17 @@ def train(
     return config
 
 
+def _json_flag(parser: argparse.ArgumentParser, flag: str, text: str) -> dict[str, Any]:
+    """The JSON object given to ``flag``; a usage error (exit 2) naming the flag otherwise."""
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        parser.error(f"{flag} must be a JSON object: {exc}")
+    if not isinstance(value, dict):
+        parser.error(f"{flag} must be a JSON object, got {type(value).__name__}")
+    return value
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="python -m train.leaders", description=__doc__.splitlines()[0])
     p.add_argument("--config", default=None, help="a training recipe (YAML, train/configs/); flags override it")
@@ -443,6 +454,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--algo-kwargs", default="", help='JSON hyperparameters over the recipe\'s, e.g. {"gamma": 0.995}')
     p.add_argument("--policy-kwargs", default="", help='JSON SB3 policy_kwargs, e.g. {"log_std_init": -1.0}')
     p.add_argument("--eval-episodes", type=int, default=None)
+    p.add_argument(
+        "--action-mode", choices=["leaders", "maneuver"], default=None,
+        help="commander actions: every leader's input, or pose rates (formation_env.env.maneuver); default leaders",
+    )  # fmt: skip
+    p.add_argument(
+        "--range-curriculum", default="", metavar="JSON",
+        help='episode-draw curriculum over the recipe\'s, e.g. {"start": {"gap_width": [2.4, 3.0]}, "fraction": 0.5}',
+    )  # fmt: skip
     p.add_argument("--env-version", type=int, default=None, help="env version of the defaults (0, 1); default 0")
     p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
     p.add_argument(
@@ -456,15 +475,19 @@ def main(argv: Sequence[str] | None = None) -> int:
         cfg: dict[str, Any] = load_config(a.config) if a.config else {}
     except (FileNotFoundError, ValueError) as exc:
         p.error(str(exc))
-    for key in ("algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "eval_episodes", "env_version"):
+    keys = ("algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "eval_episodes", "env_version",
+            "action_mode")  # fmt: skip
+    for key in keys:
         if getattr(a, key) is not None:
             cfg[key] = getattr(a, key)
     if a.env_kwargs:
-        cfg["env_kwargs"] = {**cfg.get("env_kwargs", {}), **json.loads(a.env_kwargs)}
+        cfg["env_kwargs"] = {**cfg.get("env_kwargs", {}), **_json_flag(p, "--env-kwargs", a.env_kwargs)}
     if a.algo_kwargs:
-        cfg["algo_kwargs"] = {**cfg.get("algo_kwargs", {}), **json.loads(a.algo_kwargs)}
+        cfg["algo_kwargs"] = {**cfg.get("algo_kwargs", {}), **_json_flag(p, "--algo-kwargs", a.algo_kwargs)}
     if a.policy_kwargs:
-        cfg["policy_kwargs"] = {**cfg.get("policy_kwargs", {}), **json.loads(a.policy_kwargs)}
+        cfg["policy_kwargs"] = {**cfg.get("policy_kwargs", {}), **_json_flag(p, "--policy-kwargs", a.policy_kwargs)}
+    if a.range_curriculum:
+        cfg["range_curriculum"] = _json_flag(p, "--range-curriculum", a.range_curriculum)
     if a.curriculum:
         cur = tuple(float(v) for v in a.curriculum.split(":"))
         if len(cur) != 2:

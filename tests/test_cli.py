@@ -13,7 +13,7 @@ from formation_env.cli import main
         (["evaluate", "--episodes", "0"], "--episodes must be a positive integer"),
         (["rollout", "--steps", "-1"], "--steps must be a positive integer"),
         (["evaluate", "--policy", "nope.zip", "--episodes", "2"], "no saved model"),
-        (["evaluate", "--env-kwargs", "{bad", "--episodes", "2"], "JSONDecodeError"),
+        (["evaluate", "--env-kwargs", "{bad", "--episodes", "2"], "--env-kwargs must be a JSON object"),
         (["evaluate", "--env-kwargs", '{"gap_width": [2, 1]}', "--episodes", "2"], "low <= high"),
         (["evaluate", "--scenario", "maze"], "invalid choice"),
     ],

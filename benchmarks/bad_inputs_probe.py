@@ -247,7 +247,7 @@ def core_cases() -> Iterator[Case]:
     ):
         for label, bad in (
             ("None", None),
-            ("'omega'", "omega"),
+            ("'abc'", "abc"),
             ("NaN entry", nan_om),
             ("complex", cplx),
             ("(5, 4)", om[:, :4]),
@@ -320,7 +320,7 @@ def core_cases() -> Iterator[Case]:
     # --- Framework
     for label, bad in (
         ("None", None),
-        ("'r'", "r"),
+        ("'abc'", "abc"),
         ("NaN", fw.positions * NAN),
         ("complex", fw.positions + 1j),
         ("1-D", fw.positions[:, 0]),
@@ -401,7 +401,7 @@ def core_cases() -> Iterator[Case]:
         ("NaN", [NAN] * len(edges)),
         ("too short", [1.0]),
         ("complex", [1j] * len(edges)),
-        ("'w'", "w"),
+        ("'abc'", "abc"),
         ("2-D", np.ones((len(edges), 1))),
     ):
         yield C(f"stress_from_weights(weights={label})", lambda bad=bad: stress_from_weights(5, edges, bad), "weights")
@@ -495,7 +495,7 @@ def core_cases() -> Iterator[Case]:
         ("(4, 2)", x0[:4]),
         ("NaN", x0 * NAN),
         ("complex", x0 + 1j),
-        ("'x0'", "x0"),
+        ("'abc'", "abc"),
         ("(5, 3) with double integrators in 2D", np.zeros((5, 3))),
     ):
         yield C(f"simulate(x0={label})", lambda bad=bad: simulate(om, L, bad, 0.1, 5, "dynamic", None, di), "x0")
@@ -589,7 +589,7 @@ def core_cases() -> Iterator[Case]:
         ("NaN", np.full((2, 2), NAN)),
         ("complex", np.eye(2) * 1j),
         ("(0, 0)", np.zeros((0, 0))),
-        ("'A'", "A"),
+        ("'abc'", "abc"),
     ):
         yield C(f"LinearDynamics(A={label})", lambda bad=bad: LinearDynamics(bad, np.eye(2)), "A")
     for label, bad in (
@@ -604,7 +604,7 @@ def core_cases() -> Iterator[Case]:
         ("(1, 3)", np.ones((1, 3))),
         ("rank 1", np.ones((2, 2))),
         ("(0, 2)", np.zeros((0, 2))),
-        ("'C'", "C"),
+        ("'abc'", "abc"),
     ):
         yield C(f"LinearDynamics(C={label})", lambda bad=bad: LinearDynamics(np.zeros((2, 2)), np.eye(2), bad), "C")
     yield C("LinearDynamics(discrete='yes')", lambda: LinearDynamics(np.eye(2), np.eye(2), discrete="yes"), "discrete")
@@ -651,7 +651,7 @@ def core_cases() -> Iterator[Case]:
     yield C("dlqr(Q indefinite)", lambda: dlqr(Ad, Bd, np.diag([1.0, -1.0]), np.eye(1)), "Q")
     yield C("dlqr(Q asymmetric)", lambda: dlqr(Ad, Bd, np.array([[1.0, 0.5], [0.0, 1.0]]), np.eye(1)), "Q")
     yield C("dlqr(A NaN)", lambda: dlqr(Ad * NAN, Bd, np.eye(2), np.eye(1)), "A")
-    yield C("dlqr(Q='I')", lambda: dlqr(Ad, Bd, "I", np.eye(1)), "Q")
+    yield C("dlqr(Q='I')", lambda: dlqr(Ad, Bd, "abc", np.eye(1)), "Q")
     yield C("dare(Q=(3, 3))", lambda: dare(Ad, Bd, np.eye(3)), "Q")
     yield C("dare(B rank 0)", lambda: dare(Ad, np.zeros((2, 1))), "B")
     yield C("dare(A=None)", lambda: dare(None, Bd), "A")
@@ -882,7 +882,7 @@ def env_cases() -> Iterator[Case]:
         ("framework", 5, "framework"),
         ("framework", "_paper", "framework"),
         ("omega", np.eye(3), "omega"),
-        ("omega", "omega", "omega"),
+        ("omega", "abc", "omega"),
         ("law_params", {"gain": -1}, "gain"),
         ("law_params", {"gain": NAN}, "gain"),
         ("law_params", {"foo": 1}, "foo"),
@@ -940,6 +940,10 @@ def env_cases() -> Iterator[Case]:
         ("formation_tol", -1.0, "formation_tol"),
         ("hold_steps", 0, "hold_steps"),
         ("hold_steps", 1.5, "hold_steps"),
+        ("follower_law", np.zeros(3), "follower_law"),
+        ("dynamics", np.eye(2), "dynamics"),
+        ("observation", [["position"]], "observation"),
+        ("omega", np.full((5, 5), NAN), "omega"),
         ("foo", 1, "foo"),
     ]
     for key, val, arg in bad_args:

@@ -140,7 +140,11 @@ class Engine:
             check_number("sense_radius", sense_radius)
         law_params = check_mapping(law_params, "law_params")
         reward_weights = check_mapping(reward_weights, "reward_weights")
-        if observation is not None and (isinstance(observation, str) or not isinstance(observation, Sequence)):
+        if observation is not None and (
+            isinstance(observation, str)
+            or not isinstance(observation, Sequence)
+            or not all(isinstance(name, str) for name in observation)
+        ):
             raise TypeError(f"observation must be a sequence of block names (or None), got {observation!r}")
         self.scenario_name = scenario
         cls = REGISTRY[scenario]

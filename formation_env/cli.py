@@ -155,7 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     leaderboard_arguments(p)
     p.set_defaults(func=cmd_leaderboard)
     p = sub.add_parser("bench", **fmt, help="run the benchmarks and write BENCHMARKS.md")
-    p.add_argument("--only", nargs="*", help="sections (core, design, env)")
+    p.add_argument("--only", nargs="*", help="sections (core, design, env, conditioning)")
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default="BENCHMARKS.md")
     p.set_defaults(func=cmd_bench)

@@ -438,7 +438,7 @@ def trilateration(n: int = 100, d: int = 2, seed: int = 0, n_leaders: int | None
     framework (``fw.cliques``) for ``design_stress(fw, "constructive")``. Every follower is
     interpolated from a coarser level, the tree is only about log_(2^d)(n / k) deep, and
     cond(Omega_ff) of the constructive stress stays in the hundreds (about 550 at
-    n = 10,000, k = 100 in 2D; see ``benchmarks/conditioning.py`` and docs/conditioning.md),
+    n = 10,000, k = 100 in 2D; ``benchmarks/conditioning.py`` makes the table in BENCHMARKS.md),
     against 2e5 for the default. Degrees stay below about 50.
 
     Parameters

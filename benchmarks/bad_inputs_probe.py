@@ -1091,6 +1091,15 @@ def env_cases() -> Iterator[Case]:
 
     yield C("env().step(NaN action)", lambda: aec().step(np.full(2, NAN)), ("action", "leader_0"))
     yield C("env().step(shape (5,))", lambda: aec().step(np.zeros(5)), "action")
+
+    def aec_done_agent() -> Any:
+        e = formation_v0.env(scenario="hold", max_cycles=1)
+        e.reset(seed=0)
+        for _ in range(3):
+            e.step(np.zeros(2, np.float32))
+        return e.step(np.zeros(2, np.float32))  # the episode is over: a done agent's action must be None
+
+    yield C("env().step(action) for a done agent", aec_done_agent, ("action", "None"))
     yield C("env().reset(seed=-1)", lambda: aec().reset(seed=-1), "seed")
 
     # --- commander env

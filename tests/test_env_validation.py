@@ -145,6 +145,18 @@ def test_aec_checks_each_action_as_it_is_given():
     assert env.unwrapped.engine_state is not before
 
 
+def test_aec_done_agent_takes_none_only():
+    env = formation_v0.env(scenario="hold", max_cycles=1)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(np.zeros(2, np.float32))
+    agent = env.agent_selection
+    assert env.truncations[agent]
+    with pytest.raises(ValueError, match=f"action of {agent} must be None: the agent is done"):
+        env.step(np.zeros(2, np.float32))
+    env.step(None)  # PettingZoo's dead step
+
+
 def test_commander_refuses_complex_actions_and_pose_rates_outside_maneuver_mode():
     env = FormationCommanderEnv("hold")
     env.reset(seed=0)

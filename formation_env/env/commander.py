@@ -91,8 +91,8 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
         if action_mode not in ACTION_MODES:
             raise FormationError(f"action_mode must be one of {list(ACTION_MODES)}, got {action_mode!r}")
         self._check_render_mode(render_mode)
-        given = {"pose_speed": pose_speed, "scale_rate": scale_rate, "rotation_rate": rotation_rate,
-                 "shear_rate": shear_rate, "scale_range": scale_range}  # fmt: skip
+        given: dict[str, Any] = {"pose_speed": pose_speed, "scale_rate": scale_rate, "rotation_rate": rotation_rate,
+                                 "shear_rate": shear_rate, "scale_range": scale_range}  # fmt: skip
         pose_kwargs = {key: val for key, val in given.items() if val is not None}
         if pose_kwargs and action_mode != "maneuver":
             raise TypeError(f"{', '.join(pose_kwargs)} apply to action_mode='maneuver' only, not to {action_mode!r}")

@@ -1,4 +1,4 @@
-"""Run the benchmarks and write BENCHMARKS.md: ``python -m benchmarks [--only core design env] [--quick]``."""
+"""Run the benchmarks and write BENCHMARKS.md: ``python -m benchmarks [--only core design env conditioning]``."""
 
 from __future__ import annotations
 
@@ -11,7 +11,12 @@ from pathlib import Path
 from .timing import machine
 
 #: Benchmark modules in report order; a module whose optional dependencies are missing is reported as skipped.
-MODULES = {"core": "benchmarks.core_bench", "design": "benchmarks.design_bench", "env": "benchmarks.env_bench"}
+MODULES = {
+    "core": "benchmarks.core_bench",
+    "design": "benchmarks.design_bench",
+    "env": "benchmarks.env_bench",
+    "conditioning": "benchmarks.conditioning",
+}
 
 
 def main(argv: list[str] | None = None) -> int:

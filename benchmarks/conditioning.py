@@ -20,6 +20,7 @@ import platform
 import sys
 import time
 from datetime import datetime, timezone
+from typing import Any
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
@@ -28,8 +29,12 @@ from formation_env.core.design import design_stress
 from formation_env.core.frameworks import trilateration
 from formation_env.core.stress import Partition
 
+#: Section title in BENCHMARKS.md (``python -m benchmarks --only conditioning``).
+TITLE = "Large swarms: cond(Omega_ff) and samples to 1e-6 at T_opt (constructive stress on trilateration)"
 
-def row(n: int, d: int, k: int | None) -> str:
+
+def row(n: int, d: int, k: int | None) -> dict[str, Any]:
+    """One framework: build, design and check it (timed), then measure cond(Omega_ff) and the samples to 1e-6."""
     t0 = time.perf_counter()
     fw = trilateration(n, d, seed=0, n_leaders=k)
     omega = design_stress(fw, "constructive")
@@ -37,30 +42,43 @@ def row(n: int, d: int, k: int | None) -> str:
     lo, hi = extreme_eigenvalues(Partition(omega, fw.leaders))
     cond = hi / lo
     rho = (cond - 1) / (cond + 1)
-    steps = math.log(1e-6) / math.log(rho)
-    t_opt = 2 / (lo + hi)
     label = f"{len(fw.leaders)} (default)" if k is None else str(k)
-    return f"| {n:,} | {label} | {cond:,.0f} | {t_opt:.3g} | {steps:,.0f} | {int(fw.degree().max())} | {t_design:.2f} |"
+    return {"n": n, "leaders": label, "cond": cond, "t_opt": 2 / (lo + hi), "samples": math.log(1e-6) / math.log(rho),
+            "max_degree": int(fw.degree().max()), "seconds": t_design}  # fmt: skip
+
+
+def run(quick: bool = False, d: int = 2) -> list[dict[str, Any]]:
+    """Every row: n = 100, 1,000, 10,000 (``quick``: up to 1,000), the default leaders and k = d + 1 .. 1 % of n."""
+    rows = []
+    for n in (100, 1000) if quick else (100, 1000, 10000):
+        rows.append(row(n, d, None))
+        for k in sorted({d + 1, max(d + 1, n // 400), max(d + 1, n // 200), max(d + 1, n // 100)}):
+            rows.append(row(n, d, k))
+    return rows
+
+
+def markdown(rows: list[dict[str, Any]]) -> str:
+    """The rows as a markdown table."""
+    out = [
+        "| n | leaders k | cond(Omega_ff) | T_opt (s) | samples to 1e-6 at T_opt | max degree "
+        "| build + design + check (s) |",
+        "|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    out += [
+        f"| {r['n']:,} | {r['leaders']} | {r['cond']:,.0f} | {r['t_opt']:.3g} | {r['samples']:,.0f} | "
+        f"{r['max_degree']} | {r['seconds']:.2f} |"
+        for r in rows
+    ]
+    return "\n".join(out)
 
 
 def main(argv: list[str]) -> None:
-    sizes = (100, 1000) if "--quick" in argv else (100, 1000, 10000)
-    d = 2
     print(
         f"Machine: {platform.node()} ({platform.machine()}, {os.cpu_count()} cores), Python "
         f"{platform.python_version()}; {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC"
     )
     print("Command: `python -m benchmarks.conditioning`\n")
-    print(
-        "| n | leaders k | cond(Omega_ff) | T_opt (s) | samples to 1e-6 at T_opt | max degree "
-        "| build + design + check (s) |"
-    )
-    print("|---:|---:|---:|---:|---:|---:|---:|")
-    for n in sizes:
-        ks = sorted({d + 1, max(d + 1, n // 400), max(d + 1, n // 200), max(d + 1, n // 100)})
-        print(row(n, d, None))
-        for k in ks:
-            print(row(n, d, k))
+    print(markdown(run(quick="--quick" in argv)))
 
 
 if __name__ == "__main__":

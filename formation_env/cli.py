@@ -10,6 +10,19 @@ from pathlib import Path
 from typing import Any
 
 
+def parse_env_kwargs(text: str) -> dict[str, Any]:
+    """The ``--env-kwargs`` flag: a JSON object of env arguments ('' for none), else a ValueError naming the flag."""
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"--env-kwargs must be a JSON object such as '{{\"dt\": 0.05}}': {exc}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"--env-kwargs must be a JSON object (a dict of env arguments), got {text!r}")
+    return value
+
+
 def _jsonable(summary: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in summary.items() if not k.startswith("_")}
 
@@ -64,7 +77,7 @@ def cmd_rollout(args: argparse.Namespace) -> int:
     from . import formation_v0
     from .env.video import save_animation
 
-    kwargs = json.loads(args.env_kwargs) if args.env_kwargs else {}
+    kwargs = parse_env_kwargs(args.env_kwargs)
     env = formation_v0.parallel_env(scenario=args.scenario, render_mode="rgb_array", **kwargs)
     obs, _ = env.reset(seed=args.seed)
     policy = None
@@ -120,7 +133,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quick", action="store_true", help="fewer evaluation episodes")
     p.set_defaults(func=cmd_report)
     p = sub.add_parser("rollout", **fmt, help="render one episode to a GIF or MP4")
-    p.add_argument("--scenario", default="narrow_passage")
+    from .env.scenarios import REGISTRY
+
+    p.add_argument("--scenario", default="narrow_passage", choices=sorted(REGISTRY))
     p.add_argument("--policy", default="random", help="random, analytic, or a saved model's path")
     p.add_argument("--steps", type=int, default=400)
     p.add_argument("--seed", type=int, default=0)
@@ -140,7 +155,7 @@ def build_parser() -> argparse.ArgumentParser:
     leaderboard_arguments(p)
     p.set_defaults(func=cmd_leaderboard)
     p = sub.add_parser("bench", **fmt, help="run the benchmarks and write BENCHMARKS.md")
-    p.add_argument("--only", nargs="*", help="sections (core, design, env)")
+    p.add_argument("--only", nargs="*", help="sections (core, design, env, conditioning)")
     p.add_argument("--quick", action="store_true")
     p.add_argument("--out", default="BENCHMARKS.md")
     p.set_defaults(func=cmd_bench)
@@ -155,7 +170,7 @@ USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, TypeError, KeyError,
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
-    for name in ("episodes", "steps", "seed"):
+    for name in ("episodes", "steps", "seed", "fps"):
         value = getattr(args, name, None)
         if isinstance(value, int) and (value < 0 or (value == 0 and name != "seed")):
             parser.error(f"--{name} must be {'>= 0' if name == 'seed' else 'a positive integer'}, got {value}")

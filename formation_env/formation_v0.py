@@ -1,8 +1,8 @@
 """formation_v0: the PettingZoo environment (MPE2-style versioned entry module).
 
-``parallel_env(**kwargs)`` is the parallel env (leaders are the agents), ``env(**kwargs)``
-its AEC view (``pettingzoo.utils.parallel_to_aec``, which adds the order-enforcing wrapper;
-actions are clipped by the env itself), ``raw_env`` the unwrapped parallel class. See
+``parallel_env(**kwargs)`` is the parallel env (leaders are the agents), ``env(**kwargs)`` its AEC view
+(PettingZoo's ``parallel_to_aec`` wrapper, checking each action as it is given, and the order-enforcing
+wrapper; actions are clipped by the env itself), ``raw_env`` the unwrapped parallel class. See
 :class:`formation_env.env.formation.FormationEnv` for spaces, rewards and arguments.
 """
 
@@ -11,9 +11,8 @@ from __future__ import annotations
 from typing import Any
 
 from pettingzoo import AECEnv
-from pettingzoo.utils import parallel_to_aec
 
-from formation_env.env.formation import FormationEnv
+from formation_env.env.formation import FormationEnv, aec_env
 
 __all__ = ["env", "parallel_env", "raw_env"]
 
@@ -27,4 +26,4 @@ def parallel_env(**kwargs: Any) -> FormationEnv:
 
 def env(**kwargs: Any) -> AECEnv:
     """The AEC view of :func:`parallel_env` (agents act in turn; the step happens after the last)."""
-    return parallel_to_aec(FormationEnv(**kwargs))
+    return aec_env(FormationEnv(**kwargs))

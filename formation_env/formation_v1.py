@@ -10,9 +10,8 @@ from __future__ import annotations
 from typing import Any
 
 from pettingzoo import AECEnv
-from pettingzoo.utils import parallel_to_aec
 
-from formation_env.env.formation import FormationEnv
+from formation_env.env.formation import FormationEnv, aec_env
 from formation_env.env.versions import with_version
 
 __all__ = ["VERSION", "env", "parallel_env", "raw_env"]
@@ -28,4 +27,4 @@ def parallel_env(**kwargs: Any) -> FormationEnv:
 
 def env(**kwargs: Any) -> AECEnv:
     """The AEC view of :func:`parallel_env`."""
-    return parallel_to_aec(parallel_env(**kwargs))
+    return aec_env(parallel_env(**kwargs))

@@ -186,7 +186,7 @@ def test_affine_image_error_and_fit(seed, d, extra):
 
 
 def test_affine_image_needs_a_spanning_configuration():
-    with pytest.raises(FormationError, match="does not affinely span R\\^2"):
+    with pytest.raises(FormationError, match=r"r \(the nominal configuration\) must affinely span R\^2.*dimension 1"):
         AffineImage([[0.0, 0.0], [1.0, 1.0], [2.0, 2.0], [3.0, 3.0]])
 
 

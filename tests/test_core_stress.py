@@ -263,11 +263,11 @@ FRAMEWORK_ERRORS = {
     "too_few_leaders": (dict(leaders=[0, 1]), "at least d \\+ 1 = 3"),
     "duplicate_leaders": (dict(leaders=[0, 1, 1]), "duplicates"),
     "leader_out_of_range": (dict(leaders=[0, 1, 7]), "outside 0..4"),
-    "all_leaders": (dict(leaders=[0, 1, 2, 3, 4]), "at least one follower"),
-    "self_loop": (dict(edges=[(0, 1), (2, 2)]), "self-loop"),
-    "duplicate_edge": (dict(edges=[(0, 1), (1, 0)]), "listed twice"),
+    "all_leaders": (dict(leaders=[0, 1, 2, 3, 4]), "leaders must leave at least one follower"),
+    "self_loop": (dict(edges=[(0, 1), (2, 2)]), "edges must join two distinct agents.*self-loop"),
+    "duplicate_edge": (dict(edges=[(0, 1), (1, 0)]), r"edges must list each pair once.*\(0, 1\) twice"),
     "edge_out_of_range": (dict(edges=[(0, 5)]), "outside 0..4"),
-    "edge_not_a_pair": (dict(edges=[(0, 1, 2)]), "two endpoints"),
+    "edge_not_a_pair": (dict(edges=[(0, 1, 2)]), r"edges must be \(i, j\) pairs.*\(0, 1, 2\)"),
     "too_few_agents": (dict(positions=[[0, 0], [1, 0], [0, 1]], leaders=[0, 1, 2]), "at least d \\+ 2 = 4 agents"),
 }
 

@@ -20,18 +20,29 @@ from formation_env.core import (
     ReachabilityWarning,
     StabilityWarning,
     StressMatrixError,
+    UnknownNameError,
     check_stress,
     design_stress,
     dlqr,
+    equilibrium_stress_basis,
     follower_targets,
+    hold,
     make_law,
     paper_example,
     paper_omega,
     riccati_gain,
+    rotate,
+    rotation,
+    scale,
+    scaling,
+    shear,
+    shear_matrix,
     simulate,
     stability_report,
     stress_from_weights,
+    translate,
 )
+from formation_env.core import frameworks as lib
 from formation_env.core.frameworks import farthest_point_leaders, trilateration
 
 LEADERS = [0, 1, 2]
@@ -359,3 +370,47 @@ def test_sparse_omega_validated_too():
     om = sp.csr_matrix(asymmetric())
     with pytest.raises(StressMatrixError, match="symmetric"):
         follower_targets(om, LEADERS, X0[:3])
+
+
+# ------------------------------------------------------------------ the frameworks library and the affine helpers
+@pytest.mark.parametrize(
+    ("call", "error", "match"),
+    [
+        (lambda: lib.hexagon(radius=-1.0), FormationError, "radius must be a positive finite length in metres, got -1"),
+        (lambda: lib.hexagon(radius="1"), TypeError, r"radius must be a real number \(m\), got '1'"),
+        (lambda: lib.square_grid(spacing=0.0), FormationError, "spacing must be a positive finite length"),
+        (lambda: lib.triangle_formation(spacing=-1.0), FormationError, "spacing must be a positive finite length"),
+        (lambda: lib.bipyramid(height=float("inf")), FormationError, "height must be a positive finite length"),
+        (lambda: lib.cube_with_center(side=0.0), FormationError, "side must be a positive finite length"),
+        (lambda: lib.helix(per_turn=0.0), FormationError, "per_turn must be a positive finite number of agents"),
+        (lambda: lib.random_knn(seed=-1), FormationError, "seed must be an integer >= 0, got -1"),
+        (lambda: lib.farthest_point_leaders(X0, 3, [9]), FormationError, r"fixed must be agent indices in 0..4, got 9"),
+        (lambda: lib.get_framework("pentagon"), UnknownNameError, "name must be a registered framework"),
+        (lambda: design_stress(paper_example(), "sdp", sparse="yes"), TypeError, "sparse must be True or False"),
+        (lambda: design_stress(paper_example(), "sdp", verbose="x"), TypeError, "verbose must be True or False"),
+        (lambda: equilibrium_stress_basis(None), TypeError, "fw must be a Framework, got None"),
+        (lambda: equilibrium_stress_basis(paper_example(), -1.0), FormationError, "rtol must be"),
+        (lambda: rotation(float("nan")), FormationError, "angle must be a finite number, got nan"),
+        (lambda: rotation(None), TypeError, r"angle must be a real number \(rad\), got None"),
+        (lambda: scaling(float("nan"), 1.0), FormationError, "factors holds 1 non-finite value"),
+        (lambda: shear_matrix(float("nan")), FormationError, "amount must be a finite number, got nan"),
+        (lambda: shear_matrix(0.5, 1.5), FormationError, "d must be an integer >= 2, got the float 1.5"),
+        (lambda: translate([1.0, 0.0], 0.0, float("nan")), FormationError, "stop must be a finite number, got nan"),
+        (lambda: translate([1.0, 0.0], "0"), TypeError, r"start must be a real number \(s\)"),
+        (lambda: rotate(float("inf")), FormationError, "angle must be a finite number, got inf"),
+        (lambda: scale(float("nan")), FormationError, "factors must be a finite number, got nan"),
+        (lambda: scale(2.0, d=0), FormationError, "d must be an integer >= 1, got 0"),
+        (lambda: shear(float("nan")), FormationError, "amount must be a finite number"),
+        (lambda: hold(0), FormationError, "d must be an integer >= 1, got 0"),
+        (lambda: hold(2, np.eye(3)), ControlDimension, r"theta must have shape \(2, 2\), got \(3, 3\)"),
+        (lambda: translate([1.0, 0.0]).leader_path(X0[:3], 0.0), FormationError, "dt must be a positive finite"),
+    ],
+)
+def test_library_and_affine_helpers_name_the_argument(call, error, match):
+    with pytest.raises(error, match=match):
+        call()
+
+
+def test_get_framework_error_is_a_key_error_too():
+    with pytest.raises(KeyError, match="unknown framework 'pentagon'"):
+        lib.get_framework("pentagon")

@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.rollout import reset_paired, run_batch
+from formation_env.cli import parse_env_kwargs
 from formation_env.env.engine import Engine
 
 __all__ = ["METRIC_KEYS", "evaluate", "mean_ci", "paired_difference", "reset_paired", "run_batch", "wilson"]
@@ -336,7 +337,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run_cli(args: argparse.Namespace) -> int:
     """Run an evaluation from parsed arguments; print JSON or a table."""
-    kw = json.loads(args.env_kwargs) if getattr(args, "env_kwargs", "") else None
+    kw = parse_env_kwargs(getattr(args, "env_kwargs", "")) or None
     res = evaluate(args.policy, args.scenario, args.episodes, args.seed, env_kwargs=kw, out=args.out)
     if args.json:
         blob = {

@@ -186,6 +186,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def run_cli(args: argparse.Namespace) -> int:
+    if not Path(args.policies).is_dir():
+        raise FileNotFoundError(
+            f"--policies must be a folder of learned policies, got {args.policies} (no such folder)"
+        )
     board = leaderboard(args.episodes, args.seed, args.policies, args.scenarios)
     cmd = f"formation-env leaderboard --episodes {args.episodes} --seed {args.seed}"
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)

@@ -29,6 +29,7 @@ from .errors import (
     ReachabilityWarning,
     StabilityWarning,
     StressMatrixError,
+    UnknownNameError,
     UnstableParameterError,
 )
 from .framework import Framework
@@ -64,6 +65,7 @@ __all__ = [
     "StabilityWarning",
     "StressFeedbackLaw",
     "StressMatrixError",
+    "UnknownNameError",
     "UnstableParameterError",
     "affine_targets",
     "c2d_zoh",

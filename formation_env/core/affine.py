@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .errors import ControlDimension, FormationError
-from .validation import as_array
+from .validation import as_array, check_bool, check_dt, check_int, check_real_scalar
 
 __all__ = [
     "AffineImage",
@@ -60,6 +60,7 @@ def affine_targets(r: ArrayLike, theta: ArrayLike, b: ArrayLike) -> Array:
 
 def rotation(angle: float, axis: ArrayLike | None = None) -> Array:
     """Rotation matrix: 2D by ``angle`` (rad, counter-clockwise) or 3D about ``axis`` (Rodrigues)."""
+    angle = check_real_scalar(angle, "angle", unit="rad")
     c, s = np.cos(angle), np.sin(angle)
     if axis is None:
         return np.array([[c, -s], [s, c]])
@@ -73,19 +74,30 @@ def rotation(angle: float, axis: ArrayLike | None = None) -> Array:
 
 def scaling(*factors: float) -> Array:
     """diag(factors): scale axis i by factors[i] (d = len(factors))."""
-    f = np.asarray(factors, dtype=np.float64)
-    if f.ndim != 1 or f.size == 0 or np.any(f == 0):
-        raise FormationError(f"scaling factors must be nonzero, got {factors}")
+    f = as_array(factors, "factors", ndim=1)
+    if f.size == 0 or np.any(f == 0):
+        raise FormationError(f"scaling factors must be nonzero (one per axis), got {factors}")
     return np.diag(f)
 
 
 def shear_matrix(amount: float, d: int = 2, i: int = 0, j: int = 1) -> Array:
     """I + amount e_i e_j^T: coordinate i shifted by amount times coordinate j."""
+    amount = check_real_scalar(amount, "amount")
+    d, i, j = check_int(d, "d", low=2), check_int(i, "i"), check_int(j, "j")
     if i == j or not (0 <= i < d and 0 <= j < d):
         raise FormationError(f"shear axes must be distinct in 0..{d - 1}, got i={i}, j={j}")
     m = np.eye(d)
     m[i, j] = amount
     return m
+
+
+def _window(start: float, stop: float, smooth: bool) -> tuple[float, float, bool]:
+    """A manoeuvre's time window [start, stop] (s, finite reals) and its ``smooth`` flag, checked."""
+    return (
+        check_real_scalar(start, "start", unit="s"),
+        check_real_scalar(stop, "stop", unit="s"),
+        check_bool(smooth, "smooth"),
+    )
 
 
 def _ramp(t: float, start: float, stop: float, smooth: bool) -> float:
@@ -132,20 +144,23 @@ class Maneuver:
 
     def leader_path(self, r_leaders: ArrayLike, dt: float) -> Callable[[int], Array]:
         """Sampled leader path k -> Theta(k dt) r_l + b(k dt), shape (n_l, d): for ``simulate``."""
-        rl = as_array(r_leaders, "r_leaders", ndim=2)
+        rl = as_array(r_leaders, "r_leaders", ndim=2, shape=(None, self.d))
+        dt = check_dt(dt)
         return lambda k: self.targets(rl, k * dt)
 
 
 def hold(d: int = 2, theta: ArrayLike | None = None, b: ArrayLike | None = None) -> Maneuver:
     """A constant pose (identity by default)."""
-    th = np.eye(d) if theta is None else as_array(theta, "theta", ndim=2)
-    bb = np.zeros(d) if b is None else as_array(b, "b", ndim=1)
+    d = check_int(d, "d", low=1)
+    th = np.eye(d) if theta is None else as_array(theta, "theta", shape=(d, d))
+    bb = np.zeros(d) if b is None else as_array(b, "b", shape=(d,))
     return Maneuver(d, lambda t: th, lambda t: bb, "hold")
 
 
 def translate(offset: Sequence[float], start: float = 0.0, stop: float = 1.0, smooth: bool = True) -> Maneuver:
     """b moves from 0 to ``offset`` (m) over [start, stop] s."""
     off = as_array(offset, "offset", ndim=1)
+    start, stop, smooth = _window(start, stop, smooth)
     d = off.size
     return Maneuver(d, lambda t: np.eye(d), lambda t: _ramp(t, start, stop, smooth) * off, "translate")
 
@@ -154,6 +169,9 @@ def rotate(
     angle: float, start: float = 0.0, stop: float = 1.0, axis: ArrayLike | None = None, smooth: bool = True
 ) -> Maneuver:
     """Theta rotates from I to rotation(angle) (rad) over [start, stop] s; 3D about ``axis``."""
+    angle = check_real_scalar(angle, "angle", unit="rad")
+    start, stop, smooth = _window(start, stop, smooth)
+    rotation(angle, axis)  # validates the axis
     d = 2 if axis is None else 3
     return Maneuver(d, lambda t: rotation(_ramp(t, start, stop, smooth) * angle, axis), lambda t: np.zeros(d), "rotate")
 
@@ -162,8 +180,12 @@ def scale(
     factors: Sequence[float] | float, start: float = 0.0, stop: float = 1.0, d: int = 2, smooth: bool = True
 ) -> Maneuver:
     """Theta goes from I to diag(factors) over [start, stop] s (a scalar scales every axis)."""
-    f = np.full(d, float(factors)) if isinstance(factors, int | float) else as_array(factors, "factors", ndim=1)
-    if np.any(f <= 0):
+    start, stop, smooth = _window(start, stop, smooth)
+    if isinstance(factors, int | float):
+        f = np.full(check_int(d, "d", low=1), check_real_scalar(factors, "factors"))
+    else:
+        f = as_array(factors, "factors", ndim=1)
+    if f.size == 0 or np.any(f <= 0):
         raise FormationError(f"scale factors must be positive (a zero factor collapses the formation), got {f}")
     dd = f.size
     return Maneuver(dd, lambda t: np.diag(1 + _ramp(t, start, stop, smooth) * (f - 1)), lambda t: np.zeros(dd), "scale")
@@ -173,7 +195,8 @@ def shear(
     amount: float, start: float = 0.0, stop: float = 1.0, d: int = 2, i: int = 0, j: int = 1, smooth: bool = True
 ) -> Maneuver:
     """Theta goes from I to I + amount e_i e_j^T over [start, stop] s."""
-    shear_matrix(amount, d, i, j)  # validates the axes
+    shear_matrix(amount, d, i, j)  # validates the amount and the axes
+    start, stop, smooth = _window(start, stop, smooth)
     return Maneuver(
         d, lambda t: shear_matrix(_ramp(t, start, stop, smooth) * amount, d, i, j), lambda t: np.zeros(d), "shear"
     )
@@ -192,7 +215,10 @@ class AffineImage:
         n, d = rr.shape
         h = np.hstack([rr, np.ones((n, 1))])  # (n, d + 1)
         if np.linalg.matrix_rank(h) < d + 1:
-            raise FormationError(f"the nominal configuration does not affinely span R^{d}")
+            raise FormationError(
+                f"r (the nominal configuration) must affinely span R^{d}, got an affine span of dimension "
+                f"{np.linalg.matrix_rank(h) - 1}"
+            )
         self.r = rr
         self._h = h
         self._pinv = np.linalg.pinv(h)  # (d + 1, n)

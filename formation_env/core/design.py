@@ -68,7 +68,7 @@ from numpy.typing import ArrayLike, NDArray
 from .errors import ControlDimension, FrameworkError, StressMatrixError
 from .framework import Framework, check_framework
 from .stress import DEFAULT_RTOL, Partition, StressLike, check_stress, equilibrium_stress_basis, stress_from_weights
-from .validation import check_rtol
+from .validation import check_bool, check_rtol
 
 __all__ = [
     "METHODS",
@@ -154,6 +154,8 @@ def design_stress(
     if not isinstance(method, str):
         raise TypeError(f"method must be a string, one of {[*METHODS, *_ALIASES]}; got {type(method).__name__}")
     rtol = check_rtol(rtol)
+    sparse = None if sparse is None else check_bool(sparse, "sparse")
+    verbose = check_bool(verbose, "verbose")
     name = _ALIASES.get(method, method)
     if name not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {[*METHODS, *_ALIASES]}")

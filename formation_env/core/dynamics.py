@@ -167,7 +167,7 @@ class LinearDynamics:
         """
         p = as_array(pos, "pos")
         if p.ndim == 0 or p.shape[-1] != self.d:
-            raise ControlDimension(f"positions must end in d = {self.d}, got shape {p.shape}")
+            raise ControlDimension(f"pos must have shape (..., d) with d = {self.d}, got {p.shape}")
         return p @ np.linalg.pinv(self.C).T
 
     def step(self, x: NDArray[np.float64], u: NDArray[np.float64], dt: float) -> NDArray[np.float64]:

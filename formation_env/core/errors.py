@@ -15,12 +15,19 @@ __all__ = [
     "ReachabilityWarning",
     "StabilityWarning",
     "StressMatrixError",
+    "UnknownNameError",
     "UnstableParameterError",
 ]
 
 
 class FormationError(ValueError):
     """Base class of all formation-env input errors."""
+
+
+class UnknownNameError(FormationError, KeyError):
+    """A name not in a registry (a ``KeyError`` too, for callers that look names up); the message lists the names."""
+
+    __str__ = BaseException.__str__  # the message as written, not KeyError's repr of it
 
 
 class StressMatrixError(FormationError):

@@ -49,11 +49,13 @@ def check_leaders_span(positions: NDArray[np.float64], leaders: Sequence[int]) -
 
 
 def _normalise_edges(edges: Iterable[Sequence[int]], n: int) -> tuple[tuple[int, int], ...]:
-    if edges is not None and not isinstance(edges, np.ndarray):
+    if edges is not None and not isinstance(edges, np.ndarray | str | bytes):
+        if not isinstance(edges, Iterable):
+            raise TypeError(f"edges must be a sequence of (i, j) pairs of agent indices, got {_describe(edges)}")
         edges = list(edges)
         for e in edges:
             if np.ndim(e) != 1 or len(e) != 2:
-                raise FrameworkError(f"edge {e!r} must have two endpoints")
+                raise FrameworkError(f"edges must be (i, j) pairs of agent indices, got the entry {e!r}")
     try:
         arr = as_index_array(edges, "edges", n=n, ndim=2)
     except (ControlDimension, FormationError) as exc:
@@ -62,10 +64,10 @@ def _normalise_edges(edges: Iterable[Sequence[int]], n: int) -> tuple[tuple[int,
     seen: set[tuple[int, int]] = set()
     for i, j in arr.tolist():
         if i == j:
-            raise FrameworkError(f"edge ({i}, {j}) is a self-loop")
+            raise FrameworkError(f"edges must join two distinct agents, got the self-loop ({i}, {j})")
         key = (min(i, j), max(i, j))
         if key in seen:
-            raise FrameworkError(f"edge {key} is listed twice (the graph is undirected)")
+            raise FrameworkError(f"edges must list each pair once (the graph is undirected), got {key} twice")
         seen.add(key)
         out.append(key)
     return tuple(sorted(out))
@@ -123,7 +125,7 @@ class Framework:
         if len(set(lead)) != len(lead):
             raise FrameworkError(f"leaders {list(lead)} contain duplicates")
         if len(lead) >= n:
-            raise FrameworkError("every agent is a leader: a framework needs at least one follower")
+            raise FrameworkError(f"leaders must leave at least one follower, got all {n} agents as leaders")
         check_leaders_span(r, lead)
         r = r.copy()
         r.setflags(write=False)

@@ -19,9 +19,9 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.spatial import cKDTree
 
-from .errors import FrameworkError
+from .errors import FrameworkError, UnknownNameError
 from .framework import Framework
-from .validation import as_array, check_int, check_seed
+from .validation import as_array, as_index_array, check_int, check_real_scalar, check_seed
 
 __all__ = [
     "PAPER_OMEGA_PRINTED",
@@ -97,6 +97,11 @@ def _check_count(value: int, minimum: int, what: str) -> None:
         raise FrameworkError(f"{what} must be an integer >= {minimum}, got {value!r}") from exc
 
 
+def _length(value: float, name: str) -> float:
+    """A positive, finite length in metres (a zero or negative one collapses or mirrors the shape)."""
+    return check_real_scalar(value, name, low=0.0, unit="m", what="a positive finite length in metres")
+
+
 def hexagon(radius: float = 1.0) -> Framework:
     """A regular hexagon with its centre: 7 agents, 15 edges, in R^2.
 
@@ -110,6 +115,7 @@ def hexagon(radius: float = 1.0) -> Framework:
     radius
         Distance of the vertices from the centre, in metres.
     """
+    radius = _length(radius, "radius")
     ang = np.arange(6) * np.pi / 3
     r = radius * np.vstack([np.c_[np.cos(ang), np.sin(ang)], [0.0, 0.0]])
     rim = [(i, (i + 1) % 6) for i in range(6)]
@@ -136,6 +142,7 @@ def square_grid(rows: int = 3, cols: int = 3, spacing: float = 1.0) -> Framework
     """
     _check_count(rows, 2, "rows")
     _check_count(cols, 2, "cols")
+    spacing = _length(spacing, "spacing")
     r = spacing * np.array([[j, i] for i in range(rows) for j in range(cols)], dtype=np.float64)
     steps = spacing * np.array([[1, 0], [0, 1], [1, 1], [1, -1], [2, 0], [0, 2]], dtype=np.float64)
     leaders = [0, cols - 1, (rows - 1) * cols]
@@ -157,6 +164,7 @@ def triangle_formation(rows: int = 4, spacing: float = 1.0) -> Framework:
         Lattice spacing, in metres.
     """
     _check_count(rows, 3, "rows")
+    spacing = _length(spacing, "spacing")
     ij = [(i, j) for i in range(rows) for j in range(rows - i)]
     r = spacing * np.array([[j + i / 2, i * np.sqrt(3) / 2] for i, j in ij])
     unit = spacing * np.array([[1.0, 0.0], [0.5, np.sqrt(3) / 2], [-0.5, np.sqrt(3) / 2]])
@@ -179,6 +187,7 @@ def bipyramid(k: int = 6, radius: float = 1.0, height: float = 1.0) -> Framework
         Ring radius and apex height, in metres.
     """
     _check_count(k, 4, "k")
+    radius, height = _length(radius, "radius"), _length(height, "height")
     ang = 2 * np.pi * np.arange(k) / k
     r = np.vstack([np.c_[radius * np.cos(ang), radius * np.sin(ang), np.zeros(k)], [[0, 0, height], [0, 0, -height]]])
     ring = {tuple(sorted((i, (i + s) % k))) for i in range(k) for s in (1, 2)}
@@ -205,6 +214,7 @@ def cube_with_center(side: float = 2.0) -> Framework:
     (0 -> -side/2, 1 -> +side/2, x the high bit). Leaders are the alternate
     corners 0, 3, 5, 6 (a regular tetrahedron).
     """
+    side = _length(side, "side")
     corners = np.array([[(i >> 2) & 1, (i >> 1) & 1, i & 1] for i in range(8)], dtype=np.float64)
     r = side * (np.vstack([corners, [0.5, 0.5, 0.5]]) - 0.5)
     hamming = np.abs(corners[:, None, :] - corners[None, :, :]).sum(-1)
@@ -234,6 +244,8 @@ def helix(n: int = 12, radius: float = 1.0, pitch: float = 1.0, per_turn: float 
         trials (per_turn = 5 gives cond(Omega_ff) of about 1,500 at n = 12).
     """
     _check_count(n, 5, "n")
+    radius, pitch = _length(radius, "radius"), _length(pitch, "pitch")
+    per_turn = check_real_scalar(per_turn, "per_turn", low=0.0, what="a positive finite number of agents per turn")
     t = np.arange(n) / per_turn
     r = np.c_[radius * np.cos(2 * np.pi * t), radius * np.sin(2 * np.pi * t), pitch * t]
     edges = [(i, j) for i in range(n) for j in range(i + 1, min(i + 5, n))]
@@ -298,7 +310,7 @@ def random_knn(n: int = 20, d: int = 2, k: int = 8, seed: int = 0) -> Framework:
     _check_count(n, d + 2, "n")
     _check_count(k, d + 1, "k")
     k = min(k, n - 1)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(check_seed(seed))
     r = rng.uniform(0.0, n ** (1.0 / d), size=(n, d))
     _, idx = cKDTree(r).query(r, k=k + 1)
     i = np.repeat(np.arange(n), k)
@@ -330,7 +342,7 @@ def farthest_point_leaders(positions: ArrayLike, count: int, fixed: Sequence[int
     """
     r = as_array(positions, "positions", ndim=2)
     n = r.shape[0]
-    fixed_l = [int(i) for i in fixed]
+    fixed_l = as_index_array(fixed, "fixed", n=n, distinct=True).tolist()
     count = check_int(count, "count", low=max(1, len(fixed_l)), high=n)
     chosen = list(fixed_l)
     if not chosen:
@@ -426,7 +438,7 @@ def trilateration(n: int = 100, d: int = 2, seed: int = 0, n_leaders: int | None
     framework (``fw.cliques``) for ``design_stress(fw, "constructive")``. Every follower is
     interpolated from a coarser level, the tree is only about log_(2^d)(n / k) deep, and
     cond(Omega_ff) of the constructive stress stays in the hundreds (about 550 at
-    n = 10,000, k = 100 in 2D; see ``benchmarks/conditioning.py`` and docs/conditioning.md),
+    n = 10,000, k = 100 in 2D; ``benchmarks/conditioning.py`` makes the table in BENCHMARKS.md),
     against 2e5 for the default. Degrees stay below about 50.
 
     Parameters
@@ -513,13 +525,16 @@ def get_framework(name: str, **kwargs: Any) -> Framework:
 
     Raises
     ------
-    KeyError
-        ``name`` is not registered; the message lists the registered names.
+    UnknownNameError
+        ``name`` is not registered (a ``FormationError`` and a ``KeyError``); the message lists the names.
     TypeError
         A keyword argument the builder does not take.
     """
     try:
         builder = REGISTRY[name]
     except KeyError:
-        raise KeyError(f"unknown framework {name!r}; registered: {', '.join(sorted(REGISTRY))}") from None
+        raise UnknownNameError(
+            f"name must be a registered framework, got the unknown framework {name!r}; "
+            f"registered: {', '.join(sorted(REGISTRY))}"
+        ) from None
     return builder(**kwargs)

@@ -114,6 +114,8 @@ def equilibrium_stress_basis(fw: Framework, rtol: float = 1e-10) -> NDArray[np.f
     space of the (n d) x m rigidity-matrix transpose. For a generic
     infinitesimally rigid framework k = m - n d + d (d + 1) / 2.
     """
+    check_framework(fw)
+    rtol = check_rtol(rtol)
     e = fw.edge_array()
     r = fw.positions
     m, n, d = e.shape[0], fw.n, fw.d

@@ -34,6 +34,7 @@ __all__ = [
     "check_finite",
     "check_int",
     "check_kwargs_consumed",
+    "check_mapping",
     "check_real_scalar",
     "check_rtol",
     "check_seed",
@@ -52,9 +53,14 @@ def _describe(x: Any) -> str:
 
 
 def as_array(
-    x: ArrayLike, name: str, ndim: int | None = None, shape: tuple[int | None, ...] | None = None
+    x: ArrayLike,
+    name: str,
+    ndim: int | None = None,
+    shape: tuple[int | None, ...] | None = None,
+    finite: bool = True,
 ) -> NDArray[np.float64]:
-    """Convert ``x`` to a real float64 array, checking finiteness, ``ndim`` and ``shape`` (None = any).
+    """Convert ``x`` to a real float64 array, checking ``ndim``, ``shape`` (None = any) and finiteness
+    (``finite=False`` leaves NaN and inf to the caller, e.g. to name the agent whose action holds them).
 
     Raises:
         TypeError: None, a string, a complex or a non-numeric (object, ragged) array.
@@ -80,7 +86,8 @@ def as_array(
         raise ControlDimension(f"{name} must have {ndim} dimensions, got shape {arr.shape}")
     if shape is not None:
         check_shape(arr, shape, name)
-    check_finite(arr, name)
+    if finite:
+        check_finite(arr, name)
     return arr
 
 
@@ -293,6 +300,15 @@ def check_symmetric(mat: Any, name: str, rtol: float) -> None:
             f"{name} must be symmetric: max |{name} - {name}^T| = {asym:.3g} > tolerance {rtol * scale:.3g} "
             f"(rtol {rtol:g} times max |entry| {scale:.3g})"
         )
+
+
+def check_mapping(x: Any, name: str) -> dict[str, Any]:
+    """A dict of keyword-style settings, or None (an empty dict); anything else is a TypeError naming ``name``."""
+    if x is None:
+        return {}
+    if not isinstance(x, dict):
+        raise TypeError(f"{name} must be a dict or None, got {_describe(x)}")
+    return x
 
 
 def check_kwargs_consumed(kwargs: dict[str, Any], where: str) -> None:

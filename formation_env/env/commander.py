@@ -14,6 +14,7 @@ from gymnasium import spaces
 from numpy.typing import NDArray
 
 from formation_env.core.errors import FormationError
+from formation_env.core.validation import as_array
 
 from .engine import Engine, EngineState, StepInfo
 from .formation import SingleEnv
@@ -36,7 +37,8 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
     ## Action Space
 
     ``action_mode="leaders"``: ``Box(-1, 1, (n_l p,))``, every leader's action concatenated in
-    leader order (scaled by ``u_max`` as in ``formation_v0``; clipped; NaN/inf raise ValueError).
+    leader order (scaled by ``u_max`` as in ``formation_v0``; clipped; NaN/inf raise ValueError; another
+    shape, e.g. (n_l, p), is refused).
 
     ``action_mode="maneuver"``: ``Box(-1, 1, (d (d + 1),))`` sets rates of a commanded pose
     Theta_c = R (I + H) diag(s), b_c: [velocity of b_c (d) | log-scale rates of s per axis (d) |
@@ -63,8 +65,8 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
 
     ``gym.make("formation_env/FormationCommander-v0", scenario="narrow_passage",
     action_mode="leaders", render_mode=None, **kwargs)`` with the keyword arguments of
-    ``formation_v0.parallel_env`` and, for ``maneuver``, ``pose_speed`` (1.0), ``scale_rate`` (0.5),
-    ``rotation_rate`` (0.5), ``shear_rate`` (0.5), ``scale_range`` ((0.2, 2.0)).
+    ``formation_v0.parallel_env`` and, for ``maneuver`` only, ``pose_speed`` (1.0), ``scale_rate`` (0.5),
+    ``rotation_rate`` (0.5), ``shear_rate`` (0.5), ``scale_range`` ((0.2, 2.0)) (None: the default).
 
     ## Version History
 
@@ -79,24 +81,25 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
         action_mode: str = "leaders",
         render_mode: str | None = None,
         *,
-        pose_speed: float = 1.0,
-        scale_rate: float = 0.5,
-        rotation_rate: float = 0.5,
-        shear_rate: float = 0.5,
-        scale_range: tuple[float, float] = (0.2, 2.0),
+        pose_speed: float | None = None,
+        scale_rate: float | None = None,
+        rotation_rate: float | None = None,
+        shear_rate: float | None = None,
+        scale_range: tuple[float, float] | None = None,
         **kwargs: Any,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise FormationError(f"action_mode must be one of {list(ACTION_MODES)}, got {action_mode!r}")
         self._check_render_mode(render_mode)
+        given: dict[str, Any] = {"pose_speed": pose_speed, "scale_rate": scale_rate, "rotation_rate": rotation_rate,
+                                 "shear_rate": shear_rate, "scale_range": scale_range}  # fmt: skip
+        pose_kwargs = {key: val for key, val in given.items() if val is not None}
+        if pose_kwargs and action_mode != "maneuver":
+            raise TypeError(f"{', '.join(pose_kwargs)} apply to action_mode='maneuver' only, not to {action_mode!r}")
         self.engine = eng = Engine(scenario, **kwargs)
         self.action_mode = action_mode
         self.render_mode = render_mode
-        self.command = (
-            PoseCommand(eng, pose_speed=pose_speed, scale_rate=scale_rate, rotation_rate=rotation_rate,
-                        shear_rate=shear_rate, scale_range=scale_range)
-            if action_mode == "maneuver" else None
-        )  # fmt: skip
+        self.command = PoseCommand(eng, **pose_kwargs) if action_mode == "maneuver" else None
         low, high = eng.state_low, eng.state_high
         n_act = eng.n_l * eng.p if self.command is None else self.command.action_dim
         self.action_space = spaces.Box(-1.0, 1.0, (n_act,), dtype=np.float32)
@@ -119,6 +122,7 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
+        self._check_reset(seed, options)
         super().reset(seed=seed)
         self._state = self.engine.reset(self.np_random, 1)
         self._done = False
@@ -132,10 +136,7 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
         if self._done:
             raise FormationError("the episode is over: call reset() before step()")
         eng = self.engine
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"action must be a real array of shape {self.action_space.shape}: {exc}") from None
+        a = as_array(action, "action", finite=False)
         if a.shape != self.action_space.shape:
             raise ValueError(f"action must have shape {self.action_space.shape}, got {a.shape}")
         if self.command is None or self._pose is None:

@@ -33,6 +33,7 @@ from formation_env.core.laws import (
     stress_modes,
 )
 from formation_env.core.stress import Partition, check_stress
+from formation_env.core.validation import check_square_matrix
 
 from .scenarios import NAMED_FRAMEWORKS, REGISTRY
 
@@ -67,6 +68,8 @@ INTERVAL_POINTS = 513
 # ---------------------------------------------------------------------------- configuration
 def resolve_dynamics(dynamics: str | LinearDynamics, d: int) -> LinearDynamics:
     """``"single_integrator"`` | ``"double_integrator"`` in R^d, or a ``LinearDynamics`` with position dim d."""
+    if not isinstance(dynamics, LinearDynamics | str):
+        raise TypeError(f"dynamics must be one of {list(DYNAMICS)} or a LinearDynamics, got {type(dynamics).__name__}")
     if isinstance(dynamics, LinearDynamics):
         if dynamics.d != d:
             raise ControlDimension(f"dynamics has position dimension {dynamics.d}, the framework is in R^{d}")
@@ -80,6 +83,8 @@ def resolve_dynamics(dynamics: str | LinearDynamics, d: int) -> LinearDynamics:
 
 def check_combination(follower_law: str, dynamics: LinearDynamics) -> None:
     """Refuse law/dynamics pairs the env does not offer, with the reason."""
+    if not isinstance(follower_law, str):
+        raise TypeError(f"follower_law must be one of {list(FOLLOWER_LAWS)}, got {type(follower_law).__name__}")
     if follower_law not in FOLLOWER_LAWS:
         extra = " (linear_paper is the paper's literal eq. 25, whose followers do not track)" * (
             follower_law == "linear_paper"
@@ -150,12 +155,11 @@ def resolve_framework(
     om = omega if omega is not None else om
     if om is None:
         om = _designed_stress(fw)
+    om = check_square_matrix(om, "omega")
     if fw.n > MAX_AGENTS:  # the sparse path: never densify
         om = sp.csr_matrix(om, dtype=np.float64)
     elif sp.issparse(om):
         om = om.toarray()
-    else:
-        om = np.asarray(om, dtype=np.float64)
     check_stress(om, fw)
     return fw, om
 

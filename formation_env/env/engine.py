@@ -26,6 +26,7 @@ from formation_env.core.affine import AffineImage
 from formation_env.core.dynamics import LinearDynamics
 from formation_env.core.errors import ControlDimension, FormationError, StabilityWarning
 from formation_env.core.framework import Framework
+from formation_env.core.validation import as_array, check_mapping
 
 from . import config
 from .config import DYNAMICS, FOLLOWER_LAWS, check_combination, offered_combinations, resolve_dynamics
@@ -137,6 +138,14 @@ class Engine:
         check_number("obs_noise", obs_noise, positive=False)
         if sense_radius is not None:
             check_number("sense_radius", sense_radius)
+        law_params = check_mapping(law_params, "law_params")
+        reward_weights = check_mapping(reward_weights, "reward_weights")
+        if observation is not None and (
+            isinstance(observation, str)
+            or not isinstance(observation, Sequence)
+            or not all(isinstance(name, str) for name in observation)
+        ):
+            raise TypeError(f"observation must be a sequence of block names (or None), got {observation!r}")
         self.scenario_name = scenario
         cls = REGISTRY[scenario]
         fw, om = config.resolve_framework(framework, omega, cls.default_framework)
@@ -256,6 +265,8 @@ class Engine:
         """Draw B new episodes from ``rng``: agents at rest on the scenario's start, law memory empty."""
         if isinstance(B, bool) or not isinstance(B, (int, np.integer)) or B < 1:
             raise FormationError(f"batch size B must be a positive integer, got {B!r}")
+        if not isinstance(rng, np.random.Generator):
+            raise TypeError(f"rng must be a np.random.Generator, got {type(rng).__name__}")
         return self._start(self.scenario.reset(rng, int(B)))
 
     def reset_each(self, rngs: Sequence[np.random.Generator]) -> EngineState:
@@ -377,10 +388,7 @@ class Engine:
 
     def check_actions(self, actions: ArrayLike, B: int) -> Array:
         """Actions as float64 (B, n_l, p); raise ValueError naming the leader on NaN or inf."""
-        try:
-            a = np.asarray(actions, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise TypeError(f"actions must be a real array of shape ({B}, {self.n_l}, {self.p}): {exc}") from None
+        a = as_array(actions, "actions", finite=False)
         if a.shape != (B, self.n_l, self.p):
             raise ControlDimension(f"actions must have shape (B, n_l, p) = ({B}, {self.n_l}, {self.p}), got {a.shape}")
         bad = ~np.isfinite(a).all(axis=-1)
@@ -408,6 +416,8 @@ class Engine:
             (state', obs (B, n_l, obs_dim) float32, rewards (B, n_l), terminated (B,), truncated (B,), info)
             with the arrays (B,) of ``INFO_KEYS`` (control_effort (B, n_l): |u_i|^2).
         """
+        if not isinstance(state, EngineState):
+            raise TypeError(f"state must be an EngineState (from reset), got {type(state).__name__}")
         B = state.batch_size
         a = np.clip(self.check_actions(actions, B), -1.0, 1.0)
         u = self.u_max * a

@@ -10,15 +10,18 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import EzPickle
 from numpy.typing import NDArray
-from pettingzoo import ParallelEnv
+from pettingzoo import AECEnv, ParallelEnv
+from pettingzoo.utils.conversions import parallel_to_aec_wrapper
+from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
-from formation_env.core.errors import FormationError
+from formation_env.core.errors import ControlDimension, FormationError
+from formation_env.core.validation import as_array, check_mapping, check_seed
 
 from .engine import INFO_KEYS, Engine, EngineState, StepInfo
 from .observations import observation_table
 from .rewards import reward_table
 
-__all__ = ["FormationEnv", "neutral_info"]
+__all__ = ["CheckedAEC", "FormationEnv", "aec_env", "neutral_info"]
 
 
 def neutral_info(goal_distance: float, formation_error: float) -> StepInfo:
@@ -47,6 +50,13 @@ class SingleEnv:
             raise FormationError(
                 f"render_mode must be None or one of {self.metadata['render_modes']}, got {render_mode!r}"
             )
+
+    @staticmethod
+    def _check_reset(seed: Any, options: Any) -> None:
+        """Refuse a seed that is not a non-negative integer (or None) and options that are not a dict (or None)."""
+        if seed is not None:
+            check_seed(seed)
+        check_mapping(options, "options")
 
     def _state_or_raise(self, method: str) -> EngineState:
         if self._state is None:
@@ -217,13 +227,29 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
         self._trail: list[NDArray[np.float64]] = []
 
     # ------------------------------------------------------------------ spaces
+    def _check_agent(self, agent: Any) -> None:
+        if agent not in self.observation_spaces:
+            raise ValueError(f"agent must be one of {self.possible_agents}, got {agent!r}")
+
     def observation_space(self, agent: str) -> spaces.Box:
         """The (shared) observation space; the same object on every call."""
+        self._check_agent(agent)
         return self._obs_space
 
     def action_space(self, agent: str) -> spaces.Box:
         """The (shared) action space; the same object on every call."""
+        self._check_agent(agent)
         return self._act_space
+
+    def check_action(self, agent: str, action: Any) -> NDArray[np.float64]:
+        """``agent``'s action as float64 (p,): a real array of the action space's shape, without NaN or inf
+        (values beyond [-1, 1] are clipped by the step). For the AEC view, which checks each action as it comes."""
+        a = as_array(action, f"action of {agent}", finite=False)
+        if a.shape != self._act_space.shape:
+            raise ControlDimension(f"action of {agent} must have shape {self._act_space.shape}, got {a.shape}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action of {agent} holds NaN or inf: {a.tolist()}; the state is unchanged")
+        return a
 
     @property
     def max_cycles(self) -> int:
@@ -243,7 +269,9 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
     def reset(
         self, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, NDArray[np.float32]], dict[str, dict[str, Any]]]:
-        """Start an episode; ``seed`` reseeds the env's generator (``options`` is accepted and unused)."""
+        """Start an episode; ``seed`` (an integer >= 0) reseeds the env's generator. ``options`` (a dict) is
+        accepted and unused, as PettingZoo's own checkers pass arbitrary keys."""
+        self._check_reset(seed, options)
         if seed is not None or self._rng is None:
             self._rng = np.random.default_rng(seed)
         self._state = self.engine.reset(self._rng, 1)
@@ -264,11 +292,10 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
             return {}, {}, {}, {}, {}
         if not isinstance(actions, dict) or set(actions) != set(self.agents):
             got = sorted(actions) if isinstance(actions, dict) else type(actions).__name__
-            raise ValueError(f"step() needs a dict with an action for exactly the live agents {self.agents}, got {got}")
-        try:
-            a = np.array([actions[ag] for ag in self.possible_agents], dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise ValueError(f"actions must be real arrays of shape {self._act_space.shape}: {exc}") from None
+            raise ValueError(
+                f"actions must be a dict with an action for exactly the live agents {self.agents}, got {got}"
+            )
+        a = as_array([actions[ag] for ag in self.possible_agents], "actions", finite=False)
         if a.shape != self._act_shape:
             raise ValueError(f"each action must have shape {self._act_space.shape}, got actions of shape {a.shape[1:]}")
         self._state, ob, rw, te, trn, inf = self.engine.step(state, a[None], self._rng)
@@ -308,3 +335,22 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
 
     def __str__(self) -> str:
         return "formation_v0"
+
+
+class CheckedAEC(parallel_to_aec_wrapper):
+    """PettingZoo's AEC view of a :class:`FormationEnv` that checks each action as it is given
+    (:meth:`FormationEnv.check_action`), not only when the last agent's action runs the parallel step."""
+
+    def step(self, action: Any) -> None:
+        agent = self.agent_selection
+        if self.terminations[agent] or self.truncations[agent]:
+            if action is not None:
+                raise ValueError(f"action of {agent} must be None: the agent is done, got {action!r}")
+        else:
+            action = self.env.check_action(agent, action)
+        super().step(action)
+
+
+def aec_env(parallel: FormationEnv) -> AECEnv:
+    """The AEC view of ``parallel`` (PettingZoo's ``parallel_to_aec`` with :class:`CheckedAEC`, order enforced)."""
+    return OrderEnforcingWrapper(CheckedAEC(parallel))

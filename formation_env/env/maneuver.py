@@ -20,6 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from formation_env.core.errors import FormationError
+from formation_env.core.validation import as_array, check_real_scalar
 
 from .control import track_targets
 from .scenarios._base import affine_batch, rotation_2d, rotation_3d
@@ -76,12 +77,11 @@ class PoseCommand:
         scale_range: tuple[float, float] = (0.2, 2.0),
     ) -> None:
         self.engine = engine
-        self.rates = np.array([pose_speed, scale_rate, rotation_rate, shear_rate], dtype=np.float64)
-        if not (np.all(np.isfinite(self.rates)) and np.all(self.rates > 0)):
-            raise FormationError(
-                f"pose_speed, scale_rate, rotation_rate, shear_rate must be positive, got {self.rates}"
-            )
-        self.scale_range = (float(scale_range[0]), float(scale_range[1]))
+        rates = {"pose_speed": pose_speed, "scale_rate": scale_rate, "rotation_rate": rotation_rate,
+                 "shear_rate": shear_rate}  # fmt: skip
+        self.rates = np.array([check_real_scalar(v, k, low=0.0) for k, v in rates.items()], dtype=np.float64)
+        lo, hi = as_array(scale_range, "scale_range", shape=(2,))
+        self.scale_range = (float(lo), float(hi))
         if not 0 < self.scale_range[0] < 1 < self.scale_range[1]:
             raise FormationError(f"scale_range must satisfy 0 < lo < 1 < hi, got {scale_range}")
         d = engine.d

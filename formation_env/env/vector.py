@@ -49,6 +49,7 @@ from numpy.typing import ArrayLike, NDArray
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices
 
 from formation_env.core.errors import FormationError
+from formation_env.core.validation import as_array, check_int, check_mapping, check_seed
 
 from .engine import INFO_KEYS, Engine, EngineState
 from .maneuver import Pose, PoseCommand
@@ -101,17 +102,18 @@ class FormationVecEnv(VecEnv):
     ) -> None:
         if mode not in MODES:
             raise FormationError(f"mode must be one of {list(MODES)}, got {mode!r}")
-        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
-            raise FormationError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if seed is not None and (isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0):
-            raise FormationError(f"seed must be a non-negative integer or None, got {seed!r}")
+        check_int(num_envs, "num_envs", low=1, what="a positive integer")
+        if seed is not None:
+            check_seed(seed)
         if engine is not None and env_kwargs:
             raise TypeError(f"pass either engine= or engine keyword arguments, not both (got {sorted(env_kwargs)})")
+        if engine is not None and not isinstance(engine, Engine):
+            raise TypeError(f"engine must be an Engine (or None), got {type(engine).__name__}")
         if render_mode not in (None, "rgb_array"):
             raise FormationError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
         if action_mode not in ("leaders", "maneuver") or (action_mode == "maneuver" and mode != "commander"):
             raise FormationError(f"action_mode must be 'leaders', or 'maneuver' in commander mode, got {action_mode!r}")
-        if maneuver_kwargs and action_mode != "maneuver":
+        if check_mapping(maneuver_kwargs, "maneuver_kwargs") and action_mode != "maneuver":
             raise TypeError("maneuver_kwargs is for action_mode='maneuver' only")
         self.engine = eng = engine if engine is not None else Engine(scenario, **env_kwargs)
         self.command = PoseCommand(eng, **(maneuver_kwargs or {})) if action_mode == "maneuver" else None
@@ -167,7 +169,7 @@ class FormationVecEnv(VecEnv):
         """Seed the next reset: env b (all its slots) gets ``seed + b``; returns the seed of every slot."""
         if seed is None:
             seed = int(np.random.SeedSequence().generate_state(1)[0])
-        self._next_seed = int(seed)
+        self._next_seed = check_seed(seed)
         return [self._next_seed + s // self._per_env for s in range(self.num_envs)]
 
     def reset(self) -> NDArray[np.float32]:
@@ -191,10 +193,7 @@ class FormationVecEnv(VecEnv):
         if self.state is None:
             raise FormationError("reset() must be called before step()")
         expect = (self.num_envs, int(self.action_space.shape[0]))  # type: ignore[index]
-        try:
-            a = np.asarray(actions, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise TypeError(f"actions must be a real array of shape {expect}: {exc}") from None
+        a = as_array(actions, "actions", finite=False)
         if a.shape != expect:
             raise FormationError(f"actions must have shape {expect} (slots, action dim), got {a.shape}")
         if self.command is None:
@@ -274,6 +273,8 @@ class FormationVecEnv(VecEnv):
     def get_attr(self, attr_name: str, indices: VecEnvIndices = None) -> list[Any]:
         """The attribute of this env (or its engine) once per slot in ``indices``."""
         owner = self if hasattr(self, attr_name) else self.engine
+        if not hasattr(owner, attr_name):  # AttributeError, as SB3's has_attr expects
+            raise AttributeError(f"attr_name {attr_name!r} is an attribute of neither FormationVecEnv nor its Engine")
         value = getattr(owner, attr_name)
         return [value for _ in self._get_indices(indices)]
 
@@ -285,7 +286,9 @@ class FormationVecEnv(VecEnv):
         self, method_name: str, *method_args: Any, indices: VecEnvIndices = None, **method_kwargs: Any
     ) -> list[Any]:
         """Call an engine method once per slot in ``indices``."""
-        fn = getattr(self.engine, method_name)
+        fn = getattr(self.engine, method_name, None)
+        if not callable(fn):  # AttributeError, as SB3's VecEnv.env_method raises
+            raise AttributeError(f"method_name {method_name!r} is not a method of the Engine")
         return [fn(*method_args, **method_kwargs) for _ in self._get_indices(indices)]
 
     def env_is_wrapped(self, wrapper_class: type, indices: VecEnvIndices = None) -> list[bool]:
@@ -315,6 +318,8 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
     metadata = {"render_modes": ["rgb_array"], "autoreset_mode": gymnasium.vector.AutoresetMode.SAME_STEP}
 
     def __init__(self, venv: FormationVecEnv) -> None:
+        if not isinstance(venv, FormationVecEnv):
+            raise TypeError(f"venv must be a FormationVecEnv, got {type(venv).__name__}")
         self.venv = venv
         self.num_envs = venv.num_envs
         self.single_observation_space = venv.observation_space
@@ -326,7 +331,8 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[NDArray[np.float32], dict[str, Any]]:
-        """Reset every env; ``seed`` seeds env b with ``seed + b``."""
+        """Reset every env; ``seed`` seeds env b with ``seed + b`` (``options``, a dict, is accepted and unused)."""
+        check_mapping(options, "options")
         if seed is not None:
             self.venv.seed(seed)
         return self.venv.reset(), {}

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from formation_env.core.validation import check_mapping
+
 __all__ = ["ENV_VERSIONS", "LATEST", "with_version"]
 
 #: Version -> its default arguments over the engine's.
@@ -31,6 +33,7 @@ def with_version(version: int, kwargs: dict[str, Any]) -> dict[str, Any]:
     if isinstance(version, bool) or not isinstance(version, int) or version not in ENV_VERSIONS:
         raise ValueError(f"env version must be one of {sorted(ENV_VERSIONS)}, got {version!r}")
     base = ENV_VERSIONS[version]
+    check_mapping(kwargs.get("reward_weights"), "reward_weights")
     out = {**base, **kwargs}
     if "reward_weights" in base:
         out["reward_weights"] = {**base["reward_weights"], **(kwargs.get("reward_weights") or {})}

@@ -25,7 +25,7 @@ from numpy.typing import NDArray
 
 from formation_env.core.errors import FormationError
 from formation_env.core.framework import Framework
-from formation_env.core.validation import check_kwargs_consumed
+from formation_env.core.validation import check_int, check_kwargs_consumed, check_real_scalar
 
 from ..obstacles import Obstacle
 
@@ -186,10 +186,9 @@ class Scenario:
         self.formation_tol = float(
             check_number("formation_tol", kwargs.pop("formation_tol", self.formation_tol_default))
         )
-        hs = kwargs.pop("hold_steps", self.hold_steps_default)
-        if isinstance(hs, bool) or not isinstance(hs, (int, np.integer)) or hs < 1:
-            raise FormationError(f"hold_steps must be an integer >= 1, got {hs!r}")
-        self.hold_steps = int(hs)
+        self.hold_steps = int(
+            check_number("hold_steps", kwargs.pop("hold_steps", self.hold_steps_default), integer=True)
+        )
         half = np.asarray(self.half_size[: self.d], dtype=np.float64)
         self.bounds: Array = np.stack([-half, half]).astype(np.float64)
         self.obstacles: list[Obstacle] = [cls() for cls in self.obstacle_types]
@@ -197,6 +196,9 @@ class Scenario:
             if self.d not in ob.dims:
                 raise FormationError(f"scenario {self.name!r}: {type(ob).__name__} obstacles are {ob.dims}D only")
         self._init(kwargs)
+        self.follower_noise = float(
+            check_number("follower_noise", kwargs.pop("follower_noise", self.follower_noise), positive=False)
+        )
         check_kwargs_consumed(kwargs, f"scenario {self.name!r}")
         self.fit_world()
 
@@ -359,14 +361,12 @@ class Scenario:
 
 
 def check_number(name: str, value: Any, *, positive: bool = True, integer: bool = False) -> Any:
-    """``value``, checked: a number (TypeError otherwise), finite and positive (``positive``) or >= 0."""
-    kind = "integer" if integer else "number"
-    ok_types = (int, np.integer) if integer else (int, float, np.integer, np.floating)
-    if isinstance(value, bool) or not isinstance(value, ok_types):
-        raise TypeError(f"{name} must be a {'positive ' if positive else ''}{kind}, got {type(value).__name__}")
-    if not math.isfinite(value) or (value <= 0 if positive else value < 0):
-        raise FormationError(f"{name} must be {'positive' if positive else '>= 0'} and finite, got {value}")
-    return value
+    """``value``, checked by the core's validation helpers: a real number (an integer if ``integer``; TypeError
+    otherwise), finite and positive (``positive``) or >= 0 (FormationError otherwise)."""
+    sign = "positive" if positive else ">= 0"
+    if integer:
+        return check_int(value, name, low=1 if positive else 0, what=f"a {sign} integer")
+    return check_real_scalar(value, name, low=0.0, low_open=positive, what=f"{sign} and finite")
 
 
 def check_range(name: str, value: Any, lo: float = -math.inf, hi: float = math.inf) -> tuple[float, float]:

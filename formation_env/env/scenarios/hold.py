@@ -38,6 +38,7 @@ class Hold(Scenario):
     half_size: ClassVar[tuple[float, ...]] = (5.0, 5.0, 5.0)
     grows_world: ClassVar[bool] = True
     planner: ClassVar[str | None] = "agents.planner:HoldPlanner"
+    follower_noise: float = 0.3
     weights: ClassVar[dict[str, float]] = {"distance": 0.1}
     goal_tol_default: ClassVar[float] = 0.15
     hold_steps_default: ClassVar[int] = 10
@@ -51,9 +52,8 @@ class Hold(Scenario):
         self.start_b = check_range("start_b", kw.pop("start_b", (-1.0, 1.0)))
         self.goal_b = check_range("goal_b", kw.pop("goal_b", (-2.0, 2.0)))
         self.goal_angle = check_range("goal_angle", kw.pop("goal_angle", (-np.pi / 2, np.pi / 2)))
-        self.goal_scale = check_range("goal_scale", kw.pop("goal_scale", (0.6, 1.4)))
+        self.goal_scale = check_range("goal_scale", kw.pop("goal_scale", (0.6, 1.4)), lo=1e-9)
         self.goal_shear = check_range("goal_shear", kw.pop("goal_shear", (-0.3, 0.3)))
-        self.follower_noise = float(kw.pop("follower_noise", 0.3))
 
     def draws(self) -> list[Draw]:
         d, pi = self.d, np.pi

@@ -57,16 +57,16 @@ class Maneuver(Scenario):
     half_size: ClassVar[tuple[float, ...]] = (10.0, 10.0, 10.0)
     grows_world: ClassVar[bool] = True
     planner: ClassVar[str | None] = "agents.planner:ManeuverPlanner"
+    follower_noise: float = 0.05
     weights: ClassVar[dict[str, float]] = {"progress": 0.0, "distance": 1.0, "success": 0.0}
     goal_tol_default: ClassVar[float] = 0.3
 
     def _init(self, kw: dict[str, Any]) -> None:
         self.offset_length = check_range("offset_length", kw.pop("offset_length", (2.0, 5.0)))
         self.rotation = check_range("rotation", kw.pop("rotation", (np.pi / 4, np.pi / 2)))
-        self.scale = check_range("scale", kw.pop("scale", (0.6, 1.4)))
+        self.scale = check_range("scale", kw.pop("scale", (0.6, 1.4)), lo=1e-9)
         self.shear = check_range("shear", kw.pop("shear", (-0.5, 0.5)))
         self.start_b = check_range("start_b", kw.pop("start_b", (-1.0, 1.0)))
-        self.follower_noise = float(kw.pop("follower_noise", 0.05))
         self._win = {k: (a * self.horizon, b * self.horizon) for k, (a, b) in WINDOWS.items()}
 
     def draws(self) -> list[Draw]:

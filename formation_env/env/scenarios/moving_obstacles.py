@@ -47,6 +47,7 @@ class MovingObstacles(Scenario):
     half_size: ClassVar[tuple[float, ...]] = (8.0, 5.0)
     obstacle_types = (MovingCircle,)
     planner: ClassVar[str | None] = "agents.planner:CrossingPlanner"
+    follower_noise: float = 0.1
 
     def _init(self, kw: dict[str, Any]) -> None:
         n_m = kw.pop("n_moving", 3)
@@ -63,7 +64,6 @@ class MovingObstacles(Scenario):
         self.goal_x = check_range("goal_x", kw.pop("goal_x", (5.0, 5.5)))
         self.goal_y = check_range("goal_y", kw.pop("goal_y", (-1.0, 1.0)))
         self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
-        self.follower_noise = float(kw.pop("follower_noise", 0.1))
         m = self.n_moving
         self.lanes = np.linspace(*self.lane_span, m) if m > 1 else np.array([np.mean(self.lane_span)])
 

@@ -50,6 +50,7 @@ class NarrowPassage(Scenario):
     half_size: ClassVar[tuple[float, ...]] = (7.0, 5.0)
     obstacle_types = (Segment,)
     planner: ClassVar[str | None] = "agents.planner:PassagePlanner"
+    follower_noise: float = 0.1
 
     def _init(self, kw: dict[str, Any]) -> None:
         self.wall_x = check_range("wall_x", kw.pop("wall_x", (-0.5, 0.5)))
@@ -60,7 +61,6 @@ class NarrowPassage(Scenario):
         self.goal_x = check_range("goal_x", kw.pop("goal_x", (3.5, 4.5)))
         self.goal_y = check_range("goal_y", kw.pop("goal_y", (-1.5, 1.5)))
         self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
-        self.follower_noise = float(kw.pop("follower_noise", 0.1))
         width = float(np.ptp(self.r[:, 1])) + 2 * self.agent_radius
         if width <= self.gap_width[1]:
             warnings.warn(

@@ -34,6 +34,7 @@ class ObstacleField(Scenario):
     half_size: ClassVar[tuple[float, ...]] = (7.0, 5.0, 5.0)
     obstacle_types = (Circle,)
     planner: ClassVar[str | None] = "agents.planner:FieldPlanner"
+    follower_noise: float = 0.1
 
     def _init(self, kw: dict[str, Any]) -> None:
         n_obs = kw.pop("n_obstacles", 6)
@@ -47,7 +48,6 @@ class ObstacleField(Scenario):
         self.goal_x = check_range("goal_x", kw.pop("goal_x", (4.0, 4.5)))
         self.lateral = check_range("lateral", kw.pop("lateral", (-1.5, 1.5)))
         self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
-        self.follower_noise = float(kw.pop("follower_noise", 0.1))
 
     def draws(self) -> list[Draw]:
         d, c = self.d, self.n_obstacles

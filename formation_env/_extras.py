@@ -34,7 +34,7 @@ __all__ = ["EXTRAS", "MissingExtra", "missing_message", "require"]
 EXTRAS: dict[str, tuple[str, ...]] = {
     "design": ("cvxpy",),
     "env": ("gymnasium", "pettingzoo", "numba", "pygame"),
-    "train": ("stable_baselines3", "torch", "supersuit", "tensorboard", "tqdm", "rich"),
+    "train": ("stable_baselines3", "torch", "tensorboard", "tqdm", "rich"),
     "video": ("imageio", "imageio_ffmpeg"),
     "plots": ("matplotlib",),
     "rllib": ("ray",),

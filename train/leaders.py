@@ -5,8 +5,8 @@ Modes:
 * ``commander``: one policy commands every leader: observation = the global state
   (``Engine.global_state``, as ``FormationCommander-v0``), action = every leader's (n_l p,). Runs on the
   batched :class:`formation_env.env.vector.FormationVecEnv` (``mode="commander"``, ``--n-envs`` copies).
-* ``shared``: decentralised leaders share one policy on their own observations, through
-  :class:`train.shared_vec_env.SharedPolicyVecEnv` over ``formation_v0.parallel_env`` copies.
+* ``shared``: decentralised leaders share one policy on their own observations: the batched
+  :class:`formation_env.env.vector.FormationVecEnv` in ``shared`` mode (one slot per leader of each copy).
 
 ``--residual S`` (commander mode) learns a correction on top of the analytic planner:
 action = clip(planner + S * policy, -1, 1) (the planner reads the engine state of each copy).
@@ -134,26 +134,16 @@ def make_venv(
     """The raw (un-normalised) training VecEnv of ``mode``, seeded with ``seed``."""
     if action_mode != "leaders" and (mode != "commander" or residual > 0):
         raise ValueError(f"action_mode {action_mode!r} is for commander mode without --residual")
-    if mode == "commander":
-        from formation_env.env.vector import FormationVecEnv
+    if mode not in ("commander", "shared"):
+        raise ValueError(f"mode must be 'commander' or 'shared', got {mode!r}")
+    if residual > 0 and mode != "commander":
+        raise ValueError("--residual is for commander mode only")
+    from formation_env.env.vector import FormationVecEnv
 
-        venv: VecEnv = FormationVecEnv(
-            scenario, num_envs=n_envs, mode="commander", seed=seed, action_mode=action_mode, **env_kwargs
-        )
-        if residual > 0:
-            venv = ResidualVecEnv(venv, residual)
-        return venv
-    if mode == "shared":
-        if residual > 0:
-            raise ValueError("--residual is for commander mode only")
-        from formation_env import formation_v0
-
-        from .shared_vec_env import SharedPolicyVecEnv
-
-        venv = SharedPolicyVecEnv([lambda: formation_v0.parallel_env(scenario=scenario, **env_kwargs)] * n_envs)
-        venv.seed(seed)
-        return venv
-    raise ValueError(f"mode must be 'commander' or 'shared', got {mode!r}")
+    venv: VecEnv = FormationVecEnv(
+        scenario, num_envs=n_envs, mode=mode, seed=seed, action_mode=action_mode, **env_kwargs
+    )
+    return ResidualVecEnv(venv, residual) if residual > 0 else venv
 
 
 class CurveCallback(BaseCallback):
@@ -186,8 +176,8 @@ class CurveCallback(BaseCallback):
 
 class ToleranceCurriculum(BaseCallback):
     """A curriculum on the success test: the scenario's ``goal_tol`` and ``formation_tol`` start ``factor`` times
-    their values and shrink linearly to them over the first ``fraction`` of the training timesteps (commander
-    mode: the one engine of the ``FormationVecEnv``). Evaluation always uses the scenario's own test."""
+    their values and shrink linearly to them over the first ``fraction`` of the training timesteps (in the one
+    engine of the ``FormationVecEnv``). Evaluation always uses the scenario's own test."""
 
     def __init__(self, engine: Any, factor: float, fraction: float, total: int) -> None:
         super().__init__()
@@ -213,32 +203,29 @@ class ToleranceCurriculum(BaseCallback):
 class RangeCurriculum(BaseCallback):
     """A curriculum on a scenario's episode draws: each named range (e.g. ``gap_width``) starts at the given
     (lo, hi) and moves linearly to the scenario's own over the first ``fraction`` of the training timesteps, in
-    every engine given (commander mode: the ``FormationVecEnv``'s one; shared mode: each copy's). Evaluation
-    always uses the scenario's own ranges.
+    the one engine of the ``FormationVecEnv``. Evaluation always uses the scenario's own ranges.
 
     The global state's and observations' bounds stay the scenario's own: a parameter drawn outside them is
     seen clipped.
     """
 
-    def __init__(self, engines: Any, start: dict[str, Sequence[float]], fraction: float, total: int) -> None:
+    def __init__(self, engine: Any, start: dict[str, Sequence[float]], fraction: float, total: int) -> None:
         super().__init__()
         if not 0.0 < fraction <= 1.0:
             raise ValueError(f"range curriculum: fraction must be in (0, 1], got {fraction}")
-        self.scenarios = [e.scenario for e in (engines if isinstance(engines, (list, tuple)) else [engines])]
-        first = self.scenarios[0]
+        self.scenario = sc = engine.scenario
         for key, rng in start.items():
-            if not isinstance(getattr(first, key, None), tuple) or len(rng) != 2:
-                raise ValueError(f"range curriculum: {key!r} is not a (lo, hi) range of {first.name!r}")
-        self.final = {k: tuple(getattr(first, k)) for k in start}
+            if not isinstance(getattr(sc, key, None), tuple) or len(rng) != 2:
+                raise ValueError(f"range curriculum: {key!r} is not a (lo, hi) range of {sc.name!r}")
+        self.final = {k: tuple(getattr(sc, k)) for k in start}
         self.start = {k: (float(v[0]), float(v[1])) for k, v in start.items()}
         self.span = max(1, int(fraction * total))
 
     def _set(self, left: float) -> None:
         for k, (a0, a1) in self.start.items():
             b0, b1 = self.final[k]
-            for sc in self.scenarios:
-                setattr(sc, k, (b0 + left * (a0 - b0), b1 + left * (a1 - b1)))
-                sc.__dict__.pop("_plan", None)  # the draws read the ranges when the plan is built
+            setattr(self.scenario, k, (b0 + left * (a0 - b0), b1 + left * (a1 - b1)))
+            self.scenario.__dict__.pop("_plan", None)  # the draws read the ranges when the plan is built
 
     def _on_step(self) -> bool:
         self._set(max(0.0, 1.0 - self.num_timesteps / self.span))
@@ -311,7 +298,7 @@ def train(
         progress_bar: SB3's progress bar (None: only on a TTY and not in smoke runs).
         eval_episodes: evaluation episodes after training (default 2 for smoke, 50 otherwise).
         curriculum: (factor, fraction): the success test's tolerances start ``factor`` times the scenario's and
-            reach them after ``fraction`` of the timesteps (:class:`ToleranceCurriculum`; commander mode).
+            reach them after ``fraction`` of the timesteps (:class:`ToleranceCurriculum`).
         algo_kwargs: the algorithm's hyperparameters over :data:`ALGO_DEFAULTS` (e.g. ``n_steps``, ``gamma``).
         policy_kwargs: SB3 ``policy_kwargs`` over :data:`POLICY_DEFAULTS` (e.g. ``net_arch``, ``log_std_init``).
         config_file: the recipe file these came from (recorded in the saved config).
@@ -367,16 +354,12 @@ def train(
     if progress_bar is None:
         progress_bar = sys.stdout.isatty() and not smoke
     callbacks: list[BaseCallback] = [curve, ckpt]
+    base = raw.venv if isinstance(raw, ResidualVecEnv) else raw
     if curriculum is not None:
-        if mode != "commander":
-            raise ValueError("--curriculum is for commander mode (one engine) only")
-        callbacks.append(ToleranceCurriculum(raw.engine if hasattr(raw, "engine") else raw.venv.engine,
-                                             *curriculum, int(timesteps)))  # fmt: skip
+        callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:
-        base = raw.venv if isinstance(raw, ResidualVecEnv) else raw
-        engines = [base.engine] if mode == "commander" else [e.par_env.engine for e in base.envs]
         start, fraction = range_curriculum["start"], float(range_curriculum["fraction"])
-        callbacks.append(RangeCurriculum(engines, start, fraction, int(timesteps)))
+        callbacks.append(RangeCurriculum(base.engine, start, fraction, int(timesteps)))
     model.learn(int(timesteps), callback=CallbackList(callbacks), progress_bar=progress_bar, tb_log_name=name)
     wall = time.time() - t0
     stem = out / name

@@ -136,11 +136,15 @@ SENSING_KWARGS = ("observation", "k_nearest", "sense_radius", "obs_noise", "n_ra
 
 
 def sensing_kwargs(path: str | Path) -> dict[str, Any]:
-    """The :data:`SENSING_KWARGS` of a saved policy's training config (none when it has no config)."""
-    from agents.policy import LearnedPolicy
+    """The :data:`SENSING_KWARGS` of a saved policy's training config (an SB3 ``.zip`` or an RLlib checkpoint
+    folder; none when it has no config)."""
+    from agents.policy import LearnedPolicy, RLlibPolicy
 
-    cp = LearnedPolicy.paths(path)[2]
-    cfg = json.loads(cp.read_text()) if cp.exists() else {}
+    if RLlibPolicy.checkpoint_of(path) is not None:
+        cfg = RLlibPolicy.config_of(path)
+    else:
+        cp = LearnedPolicy.paths(path)[2]
+        cfg = json.loads(cp.read_text()) if cp.exists() else {}
     return {k: v for k, v in cfg.get("env_kwargs", {}).items() if k in SENSING_KWARGS}
 
 
@@ -172,7 +176,8 @@ def evaluate(
     """Evaluate a policy on the seeded suite ``seed .. seed + episodes - 1`` of ``scenario``.
 
     Args:
-        policy_spec: ``"analytic"``, ``"random"``, a path to a saved model (.zip), or a :class:`agents.policy.Policy`.
+        policy_spec: ``"analytic"``, ``"random"``, a path to a saved SB3 model (.zip), an RLlib checkpoint folder
+            (``python -m train.rllib``'s ``--out`` or its ``checkpoint/``), or a :class:`agents.policy.Policy`.
         env_kwargs: engine arguments (scenario keyword arguments included).
         out: folder for ``episodes.csv``, ``metrics.json``, ``metrics.md``, plots and a GIF (None: nothing written).
         generalisation: for ``narrow_passage``, also evaluate gap widths outside the training range.
@@ -180,9 +185,12 @@ def evaluate(
         ``{"metrics": {METRIC_KEYS...}, "ci95": {...}, "worst": {...}, "episodes": n, "seeds": [...], "policy": name,
         "scenario": ..., "per_episode": {...}, "generalisation": {suite: metrics}}``.
     """
-    from agents.policy import load_policy
+    from agents.policy import RLlibPolicy, load_policy
 
-    if env_kwargs is None and isinstance(policy_spec, (str, Path)) and str(policy_spec).endswith(".zip"):
+    saved = isinstance(policy_spec, (str, Path)) and (
+        str(policy_spec).endswith(".zip") or RLlibPolicy.checkpoint_of(policy_spec) is not None
+    )
+    if env_kwargs is None and saved:
         env_kwargs = sensing_kwargs(policy_spec)
     engine = make_engine(scenario, env_kwargs)
     policy = load_policy(policy_spec, engine) if isinstance(policy_spec, (str, Path)) else policy_spec
@@ -325,7 +333,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The evaluation options (shared by ``python -m train.evaluate`` and ``formation-env evaluate``)."""
     from formation_env.env.scenarios import REGISTRY
 
-    p.add_argument("--policy", default="analytic", help="analytic, random, or a saved model's .zip path")
+    p.add_argument(
+        "--policy",
+        default="analytic",
+        help="analytic, random, a saved SB3 model's .zip path, or an RLlib checkpoint folder (train.rllib --out)",
+    )
     p.add_argument("--scenario", default="narrow_passage", choices=sorted(REGISTRY))
     p.add_argument("--episodes", type=int, default=100, help="episodes of the suite")
     p.add_argument("--seed", type=int, default=0, help="first episode seed of the suite")

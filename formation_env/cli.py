@@ -98,6 +98,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return run_cli(args)
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train leader policies with SB3: ``python -m train.leaders`` with the same flags (``formation-env train -h``)."""
+    from train.leaders import main as train_main
+
+    return train_main(args.train_args, prog="formation-env train")
+
+
 def cmd_leaderboard(args: argparse.Namespace) -> int:
     """Every entry (random, analytic, learned) on every scenario's seeded suite; writes docs/leaderboard.md."""
     from train.leaderboard import run_cli
@@ -134,6 +141,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_arguments(p)
     p.set_defaults(func=cmd_evaluate)
+    # the flags are train.leaders' own (one parser): everything after `train` goes to it, -h included
+    p = sub.add_parser("train", add_help=False, help="train leader policies with SB3 (python -m train.leaders)")
+    p.set_defaults(func=cmd_train, train_args=[])
     p = sub.add_parser("leaderboard", **fmt, help="every policy on every scenario's suite (docs/leaderboard.md)")
     from train.leaderboard import add_arguments as leaderboard_arguments
 
@@ -154,7 +164,11 @@ USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, TypeError, KeyError,
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, rest = parser.parse_known_args(argv)
+    if args.command == "train":
+        args.train_args = rest
+    elif rest:
+        parser.error(f"unrecognized arguments: {' '.join(rest)}")
     for name in ("episodes", "steps", "seed"):
         value = getattr(args, name, None)
         if isinstance(value, int) and (value < 0 or (value == 0 and name != "seed")):

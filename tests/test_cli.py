@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from formation_env.cli import main
@@ -30,3 +32,36 @@ def test_user_errors_exit_2_with_one_line(argv, match, capsys):
 def test_debug_shows_the_traceback():
     with pytest.raises(FileNotFoundError):
         main(["--debug", "evaluate", "--policy", "nope.zip", "--episodes", "2"])
+
+
+def test_train_takes_the_flags_of_train_leaders(capsys) -> None:
+    """``formation-env train`` is ``python -m train.leaders`` under another name: same flags, same errors."""
+    from train.leaders import main as leaders_main
+
+    helps = []
+    for run in (lambda: main(["train", "-h"]), lambda: leaders_main(["-h"])):
+        with pytest.raises(SystemExit) as exc:
+            run()
+        assert exc.value.code == 0
+        helps.append(capsys.readouterr().out)
+    assert helps[0].startswith("usage: formation-env train") and "--curriculum" in helps[0]
+    flags = [set(re.findall(r"--[a-z][a-z-]*", h)) for h in helps]
+    assert flags[0] == flags[1] and len(flags[0]) > 10
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "--algo", "nope"])
+    assert exc.value.code == 2 and "argument --algo: invalid choice: 'nope'" in capsys.readouterr().err
+
+
+def test_unknown_flags_of_other_commands_are_refused(capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["evaluate", "--bogus"])
+    assert exc.value.code == 2 and "unrecognized arguments: --bogus" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_train_smoke_run(tmp_path, capsys) -> None:
+    import json
+
+    assert main(["train", "--smoke", "--scenario", "hold", "--n-envs", "2", "--seed", "3", "--out", str(tmp_path)]) == 0
+    cfg = json.loads((tmp_path / "hold_commander_config.json").read_text())
+    assert cfg["scenario"] == "hold" and cfg["seed"] == 3 and (tmp_path / "hold_commander.zip").is_file()

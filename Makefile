@@ -31,7 +31,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check . && $(BIN)/ruff format --check . && $(BIN)/mypy
 
 bench: $(STAMP)
-	$(BIN)/formation-env bench
+	$(BIN)/formation-env bench --out .
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

@@ -9,6 +9,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ._progress import add_progress_argument
+
 
 def _jsonable(summary: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in summary.items() if not k.startswith("_")}
@@ -43,17 +45,19 @@ def cmd_report(args: argparse.Namespace) -> int:
     """The main job: paper reproduction and whatever evaluation results exist, as markdown + figures."""
     from .report import write_report
 
-    path = write_report(Path(args.out), quick=args.quick)
+    path = write_report(Path(args.out), quick=args.quick, progress=args.progress)
     print(Path(path).read_text())
     print(f"report written to {path}")
     return 0
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    """Run the benchmark suite (benchmarks/) and write BENCHMARKS.md."""
+    """Run the benchmark suite (benchmarks/) and write BENCHMARKS.md into the ``--out`` folder."""
     from benchmarks.__main__ import main as bench_main
 
     argv = ["--out", args.out] + (["--quick"] if args.quick else []) + (["--only", *args.only] if args.only else [])
+    if args.progress is not None:
+        argv.append("--progress" if args.progress else "--no-progress")
     return bench_main(argv)
 
 
@@ -125,6 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("report", **fmt, help="the main job: reproduction and evaluation report (markdown + figures)")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quick", action="store_true", help="fewer evaluation episodes")
+    add_progress_argument(p)
     p.set_defaults(func=cmd_report)
     p = sub.add_parser("rollout", **fmt, help="render one episode to a GIF or MP4")
     p.add_argument("--scenario", default="narrow_passage")
@@ -149,10 +154,13 @@ def build_parser() -> argparse.ArgumentParser:
 
     leaderboard_arguments(p)
     p.set_defaults(func=cmd_leaderboard)
-    p = sub.add_parser("bench", **fmt, help="run the benchmarks and write BENCHMARKS.md")
-    p.add_argument("--only", nargs="*", help="sections (core, design, env)")
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--out", default="BENCHMARKS.md")
+    p = sub.add_parser("bench", **fmt, help="run the benchmarks and write BENCHMARKS.md into a folder")
+    p.add_argument("--only", nargs="*", choices=["core", "design", "env"], help="sections (default: all)")
+    p.add_argument("--quick", action="store_true", help="fewer repeats")
+    p.add_argument(
+        "--out", default="out", help="folder of the BENCHMARKS.md written (--out . rewrites the committed one)"
+    )
+    add_progress_argument(p)
     p.set_defaults(func=cmd_bench)
     return parser
 

@@ -65,3 +65,31 @@ def test_train_smoke_run(tmp_path, capsys) -> None:
     assert main(["train", "--smoke", "--scenario", "hold", "--n-envs", "2", "--seed", "3", "--out", str(tmp_path)]) == 0
     cfg = json.loads((tmp_path / "hold_commander_config.json").read_text())
     assert cfg["scenario"] == "hold" and cfg["seed"] == 3 and (tmp_path / "hold_commander.zip").is_file()
+
+
+def _json_and_bar(capsys, argv: list[str]) -> tuple[dict, str]:
+    import json
+
+    assert main(argv) == 0
+    cap = capsys.readouterr()
+    return json.loads(cap.out), cap.err  # stdout is the one JSON object, bar or not
+
+
+def test_progress_bars_go_to_stderr_and_keep_json_whole(capsys, tmp_path) -> None:
+    argv = ["evaluate", "--scenario", "hold", "--episodes", "2", "--json"]
+    blob, err = _json_and_bar(capsys, [*argv, "--progress"])
+    assert "metrics" in blob and "analytic on hold" in err and "step" in err
+    blob_quiet, err = _json_and_bar(capsys, argv)  # stderr is not a terminal here: no bar by default
+    assert blob_quiet == blob and "analytic on hold" not in err
+    (tmp_path / "none").mkdir()
+    lb = ["leaderboard", "--scenarios", "hold", "--episodes", "2", "--policies", str(tmp_path / "none")]
+    board, err = _json_and_bar(capsys, [*lb, "--out", str(tmp_path / "lb.md"), "--json", "--progress"])
+    assert set(board["scenarios"]["hold"]) >= {"random", "analytic"} and "/2 " in err and "suite/s" in err
+
+
+def test_bench_out_is_a_folder(capsys, tmp_path) -> None:
+    assert main(["bench", "--only", "core", "--quick", "--out", str(tmp_path / "b")]) == 0
+    assert (tmp_path / "b" / "BENCHMARKS.md").read_text().startswith("# Benchmarks")
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--out", str(tmp_path / "BENCHMARKS.md")])
+    assert exc.value.code == 2 and "--out is a folder" in capsys.readouterr().err

@@ -370,10 +370,11 @@ def train(
     if curriculum is not None:
         if mode != "commander":
             raise ValueError("--curriculum is for commander mode (one engine) only")
-        callbacks.append(ToleranceCurriculum(raw.engine if hasattr(raw, "engine") else raw.venv.engine,
+        src: Any = raw  # the batched env, or the residual wrapper around it
+        callbacks.append(ToleranceCurriculum(src.engine if hasattr(src, "engine") else src.venv.engine,
                                              *curriculum, int(timesteps)))  # fmt: skip
     if range_curriculum is not None:
-        base = raw.venv if isinstance(raw, ResidualVecEnv) else raw
+        base: Any = raw.venv if isinstance(raw, ResidualVecEnv) else raw
         engines = [base.engine] if mode == "commander" else [e.par_env.engine for e in base.envs]
         start, fraction = range_curriculum["start"], float(range_curriculum["fraction"])
         callbacks.append(RangeCurriculum(engines, start, fraction, int(timesteps)))

@@ -346,6 +346,13 @@ class RLlibPolicy(Policy):
     def act_engine(self, engine: Engine, state: EngineState, obs: Any = None) -> Array:
         B = state.batch_size
         o = engine.observe(state) if not isinstance(obs, np.ndarray) else obs  # (B, n_l, obs_dim)
+        want = getattr(getattr(self.module, "observation_space", None), "shape", None)
+        if want is not None and tuple(want) != (o.shape[-1],):
+            raise ValueError(
+                f"the RLlib policy takes observations of shape {tuple(want)}, the {engine.scenario_name!r} engine "
+                f"gives ({o.shape[-1]},): evaluate it on its training scenario "
+                f"({self.config.get('scenario', 'see its config.json')!r}) and sensing arguments"
+            )
         a = self.act(o.reshape(B * engine.n_l, -1))
         return a.reshape(B, engine.n_l, engine.p).astype(np.float64)
 

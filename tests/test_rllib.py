@@ -101,3 +101,13 @@ def test_a_missing_module_id_is_named(smoke_run: Path) -> None:
 
     with pytest.raises(ValueError, match=r"no module 'leader_0'; its modules: \['shared'\]"):
         RLlibPolicy.load(smoke_run, module_id="leader_0")
+
+
+@pytest.mark.slow
+def test_observations_of_another_shape_are_refused(smoke_run: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from formation_env.cli import main
+
+    kw = '{"observation": ["position", "velocity", "goal"]}'
+    argv = ["evaluate", "--policy", str(smoke_run), "--scenario", "hold", "--episodes", "2", "--env-kwargs", kw]
+    assert main(argv) == 2
+    assert "the RLlib policy takes observations of shape (34,)" in capsys.readouterr().err

@@ -51,7 +51,8 @@ def test_mappo_smoke_run(tmp_path: Path) -> None:
     from benchmarl.models.mlp import MlpConfig
 
     cfg = ExperimentConfig.get_from_yaml()
-    cfg.max_n_iters, cfg.on_policy_collected_frames_per_batch, cfg.on_policy_n_envs_per_worker = 2, 80, 2
+    cfg.max_n_iters, cfg.max_n_frames = 2, None
+    cfg.on_policy_collected_frames_per_batch, cfg.on_policy_n_envs_per_worker = 80, 2
     cfg.on_policy_minibatch_size, cfg.on_policy_n_minibatch_iters = 40, 1
     cfg.evaluation, cfg.render, cfg.loggers, cfg.save_folder = False, False, ["csv"], str(tmp_path)
     model = MlpConfig.get_from_yaml()

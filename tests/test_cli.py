@@ -93,3 +93,13 @@ def test_bench_out_is_a_folder(capsys, tmp_path) -> None:
     with pytest.raises(SystemExit) as exc:
         main(["bench", "--out", str(tmp_path / "BENCHMARKS.md")])
     assert exc.value.code == 2 and "--out is a folder" in capsys.readouterr().err
+
+
+def test_progress_bar_shows_on_a_terminal_or_when_asked(capsys) -> None:
+    from formation_env._progress import progress_bar
+
+    for show in (None, False, True):  # pytest's stderr is not a terminal: None shows nothing
+        with progress_bar(3, f"bar-{show}", show) as bar:
+            bar.update(3)
+    err = capsys.readouterr().err
+    assert "bar-True" in err and "bar-None" not in err and "bar-False" not in err

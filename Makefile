@@ -14,8 +14,9 @@ $(STAMP): pyproject.toml
 	# torch pinned to the CPU build that lies on this machine's disk (unpinned pulls a multi-GB CUDA build);
 	# installed first, it satisfies torch>=2.8 of the train, torchrl and bench extras as is
 	$(BIN)/python -m pip install --quiet torch==2.13.0
-	# every extra (the base install is the maths core alone) and the dev tools
-	$(BIN)/python -m pip install --quiet -e ".[all,dev]"
+	# every extra (the base install is the maths core alone) and the dev tools; torch named again, or BenchMARL's
+	# torchvision moves it to the newest release
+	$(BIN)/python -m pip install --quiet -e ".[all,dev]" torch==2.13.0
 	touch $(STAMP)
 
 setup: $(STAMP)
@@ -30,7 +31,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check . && $(BIN)/ruff format --check . && $(BIN)/mypy
 
 bench: $(STAMP)
-	$(BIN)/formation-env bench
+	$(BIN)/formation-env bench --out .
 
 clean:
 	rm -rf $(VENV) out .pytest_cache .hypothesis

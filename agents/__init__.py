@@ -1,5 +1,5 @@
-"""Leader policies: analytic planners and learned (SB3) policies behind one interface (``agents.policy``)."""
+"""Leader policies: analytic planners and learned (SB3 or RLlib) policies behind one interface (``agents.policy``)."""
 
-from .policy import AnalyticPolicy, LearnedPolicy, Policy, load_policy
+from .policy import AnalyticPolicy, LearnedPolicy, Policy, RLlibPolicy, load_policy
 
-__all__ = ["AnalyticPolicy", "LearnedPolicy", "Policy", "load_policy"]
+__all__ = ["AnalyticPolicy", "LearnedPolicy", "Policy", "RLlibPolicy", "load_policy"]

@@ -10,6 +10,9 @@ Every policy offers
 * ``act_parallel(obs_dict, env)``: a PettingZoo ``formation_v0`` parallel env's observation dict ->
   actions dict (what ``formation-env rollout`` calls).
 
+Learned policies come from SB3 (:class:`LearnedPolicy`, a ``.zip`` with its statistics and config) or from RLlib
+(:class:`RLlibPolicy`, a checkpoint folder written by ``python -m train.rllib``).
+
 Analytic planners need the engine state: ``act`` decodes it from the global state (positions,
 velocities, goals, time and scenario parameters are all in it), ``act_parallel`` reads
 ``env.unwrapped.engine`` and ``env.unwrapped.engine_state``; the interface is identical.
@@ -18,6 +21,7 @@ velocities, goals, time and scenario parameters are all in it), ``act_parallel``
 from __future__ import annotations
 
 import json
+import logging
 import pickle
 from pathlib import Path
 from typing import Any
@@ -30,7 +34,7 @@ from formation_env.env.maneuver import Pose, PoseCommand
 
 from .planner import make_planner
 
-__all__ = ["POLICY_DIR", "AnalyticPolicy", "LearnedPolicy", "Policy", "RandomPolicy", "load_policy"]
+__all__ = ["POLICY_DIR", "AnalyticPolicy", "LearnedPolicy", "Policy", "RLlibPolicy", "RandomPolicy", "load_policy"]
 
 Array = NDArray[np.float64]
 
@@ -251,8 +255,111 @@ class LearnedPolicy(Policy):
         return a.reshape(B, engine.n_l, engine.p).astype(np.float64)
 
 
+class RLlibPolicy(Policy):
+    """The shared leader policy of an RLlib checkpoint (``python -m train.rllib``; extra ``rllib``).
+
+    Every leader acts on its own observation (``Engine.observe``, (obs_dim,)) with one RLModule; the action is
+    the mean of its action distribution (deterministic), clipped to [-1, 1]. Only the module is loaded (no
+    Ray cluster, no algorithm): env-to-module connectors beyond RLlib's defaults (e.g. an observation filter) are
+    not applied, and ``train.rllib`` configures none.
+
+    Args:
+        module: the RLModule (``ray.rllib.core.rl_module.RLModule``) of the shared policy.
+        config: the run's ``config.json`` (scenario, env_kwargs, env_version, ...; ``{}`` when absent).
+        engine: the engine it acts in (built from the config's scenario and env arguments when not given).
+        name: its name in tables and file names.
+    """
+
+    #: The module id ``train.rllib`` gives the shared policy.
+    MODULE_ID = "shared"
+
+    def __init__(self, module: Any, config: dict[str, Any], engine: Engine | None = None, name: str = "rllib") -> None:
+        self.module = module
+        self.config = config
+        self.name = name
+        self._engine = engine
+
+    @property
+    def engine(self) -> Engine:  # type: ignore[override]
+        """The engine it acts in (built from the config's scenario and env arguments when not given)."""
+        if self._engine is None:
+            cfg = self.config
+            self._engine = Engine(str(cfg.get("scenario", "narrow_passage")), **cfg.get("env_kwargs", {}))
+        return self._engine
+
+    @staticmethod
+    def checkpoint_of(path: str | Path) -> Path | None:
+        """The RLlib checkpoint folder at ``path``: ``path`` itself (it holds ``rllib_checkpoint.json``) or the
+        ``checkpoint/`` inside a ``train.rllib`` output folder; None when ``path`` is neither."""
+        p = Path(path)
+        for cand in (p, p / "checkpoint"):
+            if (cand / "rllib_checkpoint.json").is_file():
+                return cand
+        return None
+
+    @classmethod
+    def config_of(cls, path: str | Path) -> dict[str, Any]:
+        """The ``config.json`` that ``train.rllib`` writes beside the checkpoint (``{}`` when there is none)."""
+        ckpt = cls.checkpoint_of(path)
+        if ckpt is None:
+            return {}
+        cp = ckpt.parent / "config.json"
+        return json.loads(cp.read_text()) if cp.is_file() else {}
+
+    @classmethod
+    def load(cls, path: str | Path, engine: Engine | Any | None = None, module_id: str | None = None) -> RLlibPolicy:
+        """Load the RLModule ``module_id`` (default: the only one, or ``"shared"``) of the checkpoint at ``path``
+        (a checkpoint folder or a ``train.rllib`` output folder)."""
+        ckpt = cls.checkpoint_of(path)
+        if ckpt is None:
+            raise FileNotFoundError(f"no RLlib checkpoint at {path} (no rllib_checkpoint.json in it or in checkpoint/)")
+        from formation_env._extras import require
+
+        rl_module = require("ray.rllib.core.rl_module.rl_module", "rllib", "an RLlib checkpoint policy")
+        modules = ckpt / "learner_group" / "learner" / "rl_module"
+        ids = sorted(d.name for d in modules.iterdir() if d.is_dir()) if modules.is_dir() else []
+        if module_id is None:
+            module_id = ids[0] if len(ids) == 1 else cls.MODULE_ID
+        if module_id not in ids:
+            raise ValueError(f"RLlib checkpoint {ckpt} has no module {module_id!r}; its modules: {ids}")
+        quiet = logging.getLogger("ray._common.deprecation")  # RLlib loading its own checkpoint warns of itself
+        level = quiet.level
+        quiet.setLevel(logging.ERROR)
+        try:
+            module = rl_module.RLModule.from_checkpoint(str(modules / module_id))
+        finally:
+            quiet.setLevel(level)
+        eng = None if engine is None else _engine_of(engine)
+        return cls(module, cls.config_of(ckpt), eng, name=f"rllib_{module_id}")
+
+    def act(self, observation: NDArray[np.floating]) -> NDArray[np.float32]:
+        """Per-leader observations (N, obs_dim) -> actions (N, p) in [-1, 1], float32 (deterministic)."""
+        import torch
+
+        obs = torch.as_tensor(np.atleast_2d(np.asarray(observation, dtype=np.float32)))
+        with torch.no_grad():
+            out = self.module.forward_inference({"obs": obs})
+            dist = self.module.get_inference_action_dist_cls().from_logits(out["action_dist_inputs"])
+            a = dist.to_deterministic().sample().cpu().numpy()
+        return np.clip(np.asarray(a, dtype=np.float32).reshape(obs.shape[0], -1), -1.0, 1.0)
+
+    def act_engine(self, engine: Engine, state: EngineState, obs: Any = None) -> Array:
+        B = state.batch_size
+        o = engine.observe(state) if not isinstance(obs, np.ndarray) else obs  # (B, n_l, obs_dim)
+        want = getattr(getattr(self.module, "observation_space", None), "shape", None)
+        if want is not None and tuple(want) != (o.shape[-1],):
+            raise ValueError(
+                f"the RLlib policy takes observations of shape {tuple(want)}, the {engine.scenario_name!r} engine "
+                f"gives ({o.shape[-1]},): evaluate it on its training scenario "
+                f"({self.config.get('scenario', 'see its config.json')!r}) and sensing arguments"
+            )
+        a = self.act(o.reshape(B * engine.n_l, -1))
+        return a.reshape(B, engine.n_l, engine.p).astype(np.float64)
+
+
 def load_policy(spec: str | Path | Policy, env: Engine | Any) -> Policy:
-    """``"analytic"`` -> :class:`AnalyticPolicy`; ``"random"`` -> :class:`RandomPolicy` (seed 0); a path ->
+    """``"analytic"`` -> :class:`AnalyticPolicy`; ``"random"`` -> :class:`RandomPolicy` (seed 0); an RLlib
+    checkpoint folder (or a ``train.rllib`` output folder) -> :class:`RLlibPolicy`; another path ->
     :class:`LearnedPolicy`; a Policy is returned as is.
 
     ``env``: an :class:`Engine` or a formation_v0 env (the policy acts in its engine).
@@ -263,4 +370,8 @@ def load_policy(spec: str | Path | Policy, env: Engine | Any) -> Policy:
         return AnalyticPolicy(env)
     if str(spec) == "random":
         return RandomPolicy(env)
+    if RLlibPolicy.checkpoint_of(spec) is not None:
+        return RLlibPolicy.load(spec, env)
+    if Path(spec).is_dir():
+        raise FileNotFoundError(f"{spec} is a folder but not an RLlib checkpoint (no rllib_checkpoint.json)")
     return LearnedPolicy.load(spec, env)

@@ -27,12 +27,18 @@ def reset_paired(engine: Engine, seeds: Sequence[int]) -> EngineState:
 
 
 def run_batch(
-    engine: Engine, act: ActFn, seeds: Sequence[int], record: int | None = None, max_steps: int | None = None
+    engine: Engine,
+    act: ActFn,
+    seeds: Sequence[int],
+    record: int | None = None,
+    max_steps: int | None = None,
+    on_step: Callable[[], Any] | None = None,
 ) -> dict[str, Any]:
     """Roll out one episode per seed, batched; ``act(engine, state, obs) -> (B, n_l, p)``.
 
     Finished episodes keep stepping (their results are frozen at their end). ``record``: index of an
-    episode whose renderer frames (``engine.frame`` dicts) are kept under ``"frames"``.
+    episode whose renderer frames (``engine.frame`` dicts) are kept under ``"frames"``. ``on_step()`` is called
+    after every batched step (a progress bar's ``update``).
 
     Returns per-episode arrays (B,): success, collision (bool), time_to_goal (s, nan if none),
     mean_formation_err, max_formation_err, min_clearance (m), control_effort, steps.
@@ -74,6 +80,8 @@ def run_batch(
             frames.append(engine.frame(state, record, np.array(trail[-60:])))
         done |= term | trunc
         del was
+        if on_step is not None:
+            on_step()
         if done.all():
             break
     if not engine.scenario.terminate_on_success:  # judged at the last sample (e.g. maneuver)

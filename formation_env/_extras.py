@@ -10,6 +10,7 @@ else comes with an extra (see ``[project.optional-dependencies]`` in ``pyproject
     plots    matplotlib                               figures of the paper reproduction and reports
     rllib    ray[rllib]                               formation_env.integrations.rllib
     torchrl  torchrl, tensordict                      TorchRL
+    benchmarl  benchmarl (torchrl 0.10-0.11)          formation_env.integrations.benchmarl
     bench    mpe2, vmas                               the peer benchmarks
 
 A function that needs one calls :func:`require` where it would import the module::
@@ -39,6 +40,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "plots": ("matplotlib",),
     "rllib": ("ray",),
     "torchrl": ("torchrl", "tensordict"),
+    "benchmarl": ("benchmarl",),
     "bench": ("mpe2", "vmas"),
 }
 

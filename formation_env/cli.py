@@ -9,6 +9,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ._progress import add_progress_argument
+
 
 def parse_env_kwargs(text: str) -> dict[str, Any]:
     """The ``--env-kwargs`` flag: a JSON object of env arguments ('' for none), else a ValueError naming the flag."""
@@ -56,17 +58,19 @@ def cmd_report(args: argparse.Namespace) -> int:
     """The main job: paper reproduction and whatever evaluation results exist, as markdown + figures."""
     from .report import write_report
 
-    path = write_report(Path(args.out), quick=args.quick)
+    path = write_report(Path(args.out), quick=args.quick, progress=args.progress)
     print(Path(path).read_text())
     print(f"report written to {path}")
     return 0
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    """Run the benchmark suite (benchmarks/) and write BENCHMARKS.md."""
+    """Run the benchmark suite (benchmarks/) and write BENCHMARKS.md into the ``--out`` folder."""
     from benchmarks.__main__ import main as bench_main
 
     argv = ["--out", args.out] + (["--quick"] if args.quick else []) + (["--only", *args.only] if args.only else [])
+    if args.progress is not None:
+        argv.append("--progress" if args.progress else "--no-progress")
     return bench_main(argv)
 
 
@@ -111,6 +115,13 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return run_cli(args)
 
 
+def cmd_train(args: argparse.Namespace) -> int:
+    """Train leader policies with SB3: ``python -m train.leaders`` with the same flags (``formation-env train -h``)."""
+    from train.leaders import main as train_main
+
+    return train_main(args.train_args, prog="formation-env train")
+
+
 def cmd_leaderboard(args: argparse.Namespace) -> int:
     """Every entry (random, analytic, learned) on every scenario's seeded suite; writes docs/leaderboard.md."""
     from train.leaderboard import run_cli
@@ -131,6 +142,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("report", **fmt, help="the main job: reproduction and evaluation report (markdown + figures)")
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quick", action="store_true", help="fewer evaluation episodes")
+    add_progress_argument(p)
     p.set_defaults(func=cmd_report)
     p = sub.add_parser("rollout", **fmt, help="render one episode to a GIF or MP4")
     from .env.scenarios import REGISTRY
@@ -149,15 +161,23 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_arguments(p)
     p.set_defaults(func=cmd_evaluate)
+    # the flags are train.leaders' own (one parser): everything after `train` goes to it, -h included
+    p = sub.add_parser("train", add_help=False, help="train leader policies with SB3 (python -m train.leaders)")
+    p.set_defaults(func=cmd_train, train_args=[])
     p = sub.add_parser("leaderboard", **fmt, help="every policy on every scenario's suite (docs/leaderboard.md)")
     from train.leaderboard import add_arguments as leaderboard_arguments
 
     leaderboard_arguments(p)
     p.set_defaults(func=cmd_leaderboard)
-    p = sub.add_parser("bench", **fmt, help="run the benchmarks and write BENCHMARKS.md")
-    p.add_argument("--only", nargs="*", help="sections (core, design, env, conditioning)")
-    p.add_argument("--quick", action="store_true")
-    p.add_argument("--out", default="BENCHMARKS.md")
+    p = sub.add_parser("bench", **fmt, help="run the benchmarks and write BENCHMARKS.md into a folder")
+    p.add_argument(
+        "--only", nargs="*", choices=["core", "design", "env", "conditioning"], help="sections (default: all)"
+    )
+    p.add_argument("--quick", action="store_true", help="fewer repeats")
+    p.add_argument(
+        "--out", default="out", help="folder of the BENCHMARKS.md written (--out . rewrites the committed one)"
+    )
+    add_progress_argument(p)
     p.set_defaults(func=cmd_bench)
     return parser
 
@@ -169,7 +189,11 @@ USER_ERRORS: tuple[type[BaseException], ...] = (ValueError, TypeError, KeyError,
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, rest = parser.parse_known_args(argv)
+    if args.command == "train":
+        args.train_args = rest
+    elif rest:
+        parser.error(f"unrecognized arguments: {' '.join(rest)}")
     for name in ("episodes", "steps", "seed", "fps"):
         value = getattr(args, name, None)
         if isinstance(value, int) and (value < 0 or (value == 0 and name != "seed")):

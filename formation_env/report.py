@@ -57,11 +57,15 @@ def _fmt_range(kind_rng: tuple[str, Any]) -> str:
     return f"{kind} in ({lo:.4g}, {hi:.4g})"
 
 
-def write_report(out: Path, quick: bool = False) -> Path:
-    """Write ``out/REPORT.md`` with figures beside it; returns its path."""
+def write_report(out: Path, quick: bool = False, progress: bool | None = False) -> Path:
+    """Write ``out/REPORT.md`` with figures beside it; returns its path. ``progress``: a bar of the report's
+    parts (and of each evaluation's steps) on stderr (None: when stderr is a terminal)."""
+    from ._progress import progress_bar
     from .reproduce import plot_reproduction, reproduce_paper
 
     out.mkdir(parents=True, exist_ok=True)
+    bar = progress_bar(4, "report", progress, "part")
+    bar.set_description_str("report: paper reproduction")
     lines = [
         "# formation-env report",
         "",
@@ -90,6 +94,8 @@ def write_report(out: Path, quick: bool = False) -> Path:
             f"Reproduced: **{s['reproduced']}**. ![reproduction]({fig.name})",
             "",
         ]
+        bar.update()
+    bar.set_description_str("report: stability")
     lines += [
         "## 2. Stability of every law on the paper's framework",
         "",
@@ -106,12 +112,16 @@ def write_report(out: Path, quick: bool = False) -> Path:
             f"{_fmt_range(r['range'])} | {r['steps_to_1e-6']:.4g} |"
         )
     lines.append("")
+    bar.update()
+    bar.set_description_str("report: evaluation")
     try:
         from train.report_section import evaluation_section  # learned vs analytic
     except ImportError:
         lines.append("(learned-vs-analytic evaluation unavailable: the `agents` package is not installed)")
     else:
-        lines += evaluation_section(out, quick=quick)
+        lines += evaluation_section(out, quick=quick, progress=progress)
+    bar.update()
+    bar.close()
     path = out / "REPORT.md"
     path.write_text("\n".join(lines) + "\n")
     return path

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from formation_env.cli import main
@@ -35,3 +37,74 @@ def test_user_errors_exit_2_with_one_line(argv, match, capsys):
 def test_debug_shows_the_traceback():
     with pytest.raises(FileNotFoundError):
         main(["--debug", "evaluate", "--policy", "nope.zip", "--episodes", "2"])
+
+
+def test_train_takes_the_flags_of_train_leaders(capsys) -> None:
+    """``formation-env train`` is ``python -m train.leaders`` under another name: same flags, same errors."""
+    from train.leaders import main as leaders_main
+
+    helps = []
+    for run in (lambda: main(["train", "-h"]), lambda: leaders_main(["-h"])):
+        with pytest.raises(SystemExit) as exc:
+            run()
+        assert exc.value.code == 0
+        helps.append(capsys.readouterr().out)
+    assert helps[0].startswith("usage: formation-env train") and "--curriculum" in helps[0]
+    flags = [set(re.findall(r"--[a-z][a-z-]*", h)) for h in helps]
+    assert flags[0] == flags[1] and len(flags[0]) > 10
+    with pytest.raises(SystemExit) as exc:
+        main(["train", "--algo", "nope"])
+    assert exc.value.code == 2 and "argument --algo: invalid choice: 'nope'" in capsys.readouterr().err
+
+
+def test_unknown_flags_of_other_commands_are_refused(capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["evaluate", "--bogus"])
+    assert exc.value.code == 2 and "unrecognized arguments: --bogus" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_train_smoke_run(tmp_path, capsys) -> None:
+    import json
+
+    assert main(["train", "--smoke", "--scenario", "hold", "--n-envs", "2", "--seed", "3", "--out", str(tmp_path)]) == 0
+    cfg = json.loads((tmp_path / "hold_commander_config.json").read_text())
+    assert cfg["scenario"] == "hold" and cfg["seed"] == 3 and (tmp_path / "hold_commander.zip").is_file()
+
+
+def _json_and_bar(capsys, argv: list[str]) -> tuple[dict, str]:
+    import json
+
+    assert main(argv) == 0
+    cap = capsys.readouterr()
+    return json.loads(cap.out), cap.err  # stdout is the one JSON object, bar or not
+
+
+def test_progress_bars_go_to_stderr_and_keep_json_whole(capsys, tmp_path) -> None:
+    argv = ["evaluate", "--scenario", "hold", "--episodes", "2", "--json"]
+    blob, err = _json_and_bar(capsys, [*argv, "--progress"])
+    assert "metrics" in blob and "analytic on hold" in err and "step" in err
+    blob_quiet, err = _json_and_bar(capsys, argv)  # stderr is not a terminal here: no bar by default
+    assert blob_quiet == blob and "analytic on hold" not in err
+    (tmp_path / "none").mkdir()
+    lb = ["leaderboard", "--scenarios", "hold", "--episodes", "2", "--policies", str(tmp_path / "none")]
+    board, err = _json_and_bar(capsys, [*lb, "--out", str(tmp_path / "lb.md"), "--json", "--progress"])
+    assert set(board["scenarios"]["hold"]) >= {"random", "analytic"} and "/2 " in err and "suite/s" in err
+
+
+def test_bench_out_is_a_folder(capsys, tmp_path) -> None:
+    assert main(["bench", "--only", "core", "--quick", "--out", str(tmp_path / "b")]) == 0
+    assert (tmp_path / "b" / "BENCHMARKS.md").read_text().startswith("# Benchmarks")
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--out", str(tmp_path / "BENCHMARKS.md")])
+    assert exc.value.code == 2 and "--out is a folder" in capsys.readouterr().err
+
+
+def test_progress_bar_shows_on_a_terminal_or_when_asked(capsys) -> None:
+    from formation_env._progress import progress_bar
+
+    for show in (None, False, True):  # pytest's stderr is not a terminal: None shows nothing
+        with progress_bar(3, f"bar-{show}", show) as bar:
+            bar.update(3)
+    err = capsys.readouterr().err
+    assert "bar-True" in err and "bar-None" not in err and "bar-False" not in err

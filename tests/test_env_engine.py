@@ -429,3 +429,25 @@ def test_dense_path_fits_the_world_to_a_large_framework():
     assert not info["out_of_bounds"].any()
     with pytest.raises(FormationError, match="scale its positions"):
         Engine("narrow_passage", framework=fw, agent_radius=0.01)
+
+
+def test_first_compile_of_the_kernels_says_so_once(tmp_path) -> None:
+    """An empty numba cache: one line on stderr while the kernels compile; the next process loads them silently."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "from formation_env import formation_v0\n"
+        "env = formation_v0.parallel_env(scenario='obstacle_field'); env.reset(seed=0)\n"
+        "env.step({a: env.action_space(a).sample() for a in env.agents})\n"
+    )
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path)}
+    errs = [
+        subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, env=env, check=True, timeout=600
+        ).stderr
+        for _ in range(2)
+    ]
+    notice = "compiling the env's step kernels with numba"
+    assert errs[0].count(notice) == 1 and notice not in errs[1]

@@ -143,7 +143,7 @@ def test_require_names_the_extra() -> None:
     msg = str(err.value)
     assert msg == "design_stress(method='sdp') needs formation_env_no_such_module: pip install 'formation-env[design]'"
     assert "\n" not in msg
-    assert set(EXTRAS) == {"design", "env", "train", "video", "plots", "rllib", "torchrl", "bench"}
+    assert set(EXTRAS) == {"design", "env", "train", "video", "plots", "rllib", "torchrl", "benchmarl", "bench"}
 
 
 def test_require_does_not_hide_a_broken_install(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:

@@ -40,6 +40,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from agents.rollout import reset_paired, run_batch
+from formation_env._progress import add_progress_argument, progress_bar
 from formation_env.cli import parse_env_kwargs
 from formation_env.env.engine import Engine
 
@@ -137,11 +138,15 @@ SENSING_KWARGS = ("observation", "k_nearest", "sense_radius", "obs_noise", "n_ra
 
 
 def sensing_kwargs(path: str | Path) -> dict[str, Any]:
-    """The :data:`SENSING_KWARGS` of a saved policy's training config (none when it has no config)."""
-    from agents.policy import LearnedPolicy
+    """The :data:`SENSING_KWARGS` of a saved policy's training config (an SB3 ``.zip`` or an RLlib checkpoint
+    folder; none when it has no config)."""
+    from agents.policy import LearnedPolicy, RLlibPolicy
 
-    cp = LearnedPolicy.paths(path)[2]
-    cfg = json.loads(cp.read_text()) if cp.exists() else {}
+    if RLlibPolicy.checkpoint_of(path) is not None:
+        cfg = RLlibPolicy.config_of(path)
+    else:
+        cp = LearnedPolicy.paths(path)[2]
+        cfg = json.loads(cp.read_text()) if cp.exists() else {}
     return {k: v for k, v in cfg.get("env_kwargs", {}).items() if k in SENSING_KWARGS}
 
 
@@ -169,26 +174,43 @@ def evaluate(
     out: str | Path | None = None,
     gif: bool = True,
     generalisation: bool = True,
+    progress: bool | None = False,
 ) -> dict[str, Any]:
     """Evaluate a policy on the seeded suite ``seed .. seed + episodes - 1`` of ``scenario``.
 
     Args:
-        policy_spec: ``"analytic"``, ``"random"``, a path to a saved model (.zip), or a :class:`agents.policy.Policy`.
+        policy_spec: ``"analytic"``, ``"random"``, a path to a saved SB3 model (.zip), an RLlib checkpoint folder
+            (``python -m train.rllib``'s ``--out`` or its ``checkpoint/``), or a :class:`agents.policy.Policy`.
         env_kwargs: engine arguments (scenario keyword arguments included).
         out: folder for ``episodes.csv``, ``metrics.json``, ``metrics.md``, plots and a GIF (None: nothing written).
         generalisation: for ``narrow_passage``, also evaluate gap widths outside the training range.
+        progress: a progress bar of the suite's steps on stderr (None: when stderr is a terminal).
     Returns:
         ``{"metrics": {METRIC_KEYS...}, "ci95": {...}, "worst": {...}, "episodes": n, "seeds": [...], "policy": name,
         "scenario": ..., "per_episode": {...}, "generalisation": {suite: metrics}}``.
     """
-    from agents.policy import load_policy
+    from agents.policy import RLlibPolicy, load_policy
 
-    if env_kwargs is None and isinstance(policy_spec, (str, Path)) and str(policy_spec).endswith(".zip"):
+    saved = isinstance(policy_spec, (str, Path)) and (
+        str(policy_spec).endswith(".zip") or RLlibPolicy.checkpoint_of(policy_spec) is not None
+    )
+    if env_kwargs is None and saved:
         env_kwargs = sensing_kwargs(policy_spec)
     engine = make_engine(scenario, env_kwargs)
     policy = load_policy(policy_spec, engine) if isinstance(policy_spec, (str, Path)) else policy_spec
     seeds = list(range(int(seed), int(seed) + int(episodes)))
-    res = run_batch(engine, policy.act_engine, seeds)
+    gen_suites = (
+        [n for n in GAP_SUITES if n != "train_range"] if generalisation and scenario == "narrow_passage" else []
+    )
+    bar = progress_bar((1 + len(gen_suites)) * engine.max_cycles, f"{policy.name} on {scenario}", progress, "step")
+
+    def run(eng: Engine) -> dict[str, Any]:
+        start = bar.n
+        out = run_batch(eng, policy.act_engine, seeds, on_step=bar.update)
+        bar.update(start + eng.max_cycles - bar.n)  # a suite whose episodes all ended early counts in full
+        return out
+
+    res = run(engine)
     metrics, cis, worst = summarise(res)
     result: dict[str, Any] = {
         "metrics": metrics,
@@ -200,14 +222,10 @@ def evaluate(
         "scenario": scenario,
         "per_episode": {k: np.asarray(v).tolist() for k, v in res.items() if k != "frames"},
     }
-    if generalisation and scenario == "narrow_passage":
-        gen = {}
-        for name, rng_w in GAP_SUITES.items():
-            if name == "train_range":
-                continue
-            eng = gap_engine(rng_w, env_kwargs)
-            gen[name] = summarise(run_batch(eng, policy.act_engine, seeds))[0]
-        result["generalisation"] = gen
+    if gen_suites:
+        result["generalisation"] = {name: summarise(run(gap_engine(GAP_SUITES[name], env_kwargs)))[0]
+                                    for name in gen_suites}  # fmt: skip
+    bar.close()
     if out is not None:
         write_outputs(result, engine, policy, seeds, Path(out), gif=gif)
     return result
@@ -326,19 +344,26 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     """The evaluation options (shared by ``python -m train.evaluate`` and ``formation-env evaluate``)."""
     from formation_env.env.scenarios import REGISTRY
 
-    p.add_argument("--policy", default="analytic", help="analytic, random, or a saved model's .zip path")
+    p.add_argument(
+        "--policy",
+        default="analytic",
+        help="analytic, random, a saved SB3 model's .zip path, or an RLlib checkpoint folder (train.rllib --out)",
+    )
     p.add_argument("--scenario", default="narrow_passage", choices=sorted(REGISTRY))
     p.add_argument("--episodes", type=int, default=100, help="episodes of the suite")
     p.add_argument("--seed", type=int, default=0, help="first episode seed of the suite")
     p.add_argument("--json", action="store_true", help='print one JSON object {"metrics": {...}}')
     p.add_argument("--out", default=None, help="folder for CSV/JSON/markdown, plots and a GIF")
     p.add_argument("--env-kwargs", default="", help="JSON dict of engine arguments")
+    add_progress_argument(p)
 
 
 def run_cli(args: argparse.Namespace) -> int:
     """Run an evaluation from parsed arguments; print JSON or a table."""
     kw = parse_env_kwargs(getattr(args, "env_kwargs", "")) or None
-    res = evaluate(args.policy, args.scenario, args.episodes, args.seed, env_kwargs=kw, out=args.out)
+    res = evaluate(
+        args.policy, args.scenario, args.episodes, args.seed, env_kwargs=kw, out=args.out, progress=args.progress
+    )
     if args.json:
         blob = {
             "metrics": res["metrics"],

@@ -31,9 +31,11 @@ import numpy as np
 
 from agents.bounds import time_lower_bound_seeds
 from agents.policy import POLICY_DIR
+from formation_env._progress import add_progress_argument, progress_bar
 from formation_env.env.scenarios import REGISTRY
 
-from .evaluate import _finite, evaluate, make_engine
+from .evaluate import _finite, make_engine
+from .evaluate import evaluate as evaluate_suite
 
 __all__ = ["ENTRIES", "LEARNED", "find_policies", "leaderboard", "main", "markdown"]
 
@@ -66,19 +68,34 @@ def _with_bound(result: dict[str, Any], bound: np.ndarray) -> dict[str, float]:
 
 
 def leaderboard(
-    episodes: int = 100, seed: int = 0, policies: str | Path = PRETRAINED, scenarios: Sequence[str] | None = None
+    episodes: int = 100,
+    seed: int = 0,
+    policies: str | Path = PRETRAINED,
+    scenarios: Sequence[str] | None = None,
+    progress: bool | None = False,
 ) -> dict[str, Any]:
     """Evaluate every entry on every scenario's suite; the JSON contract ``{"scenarios": {...}}`` plus
-    ``"episodes"``, ``"seed"``, ``"policies"``."""
+    ``"episodes"``, ``"seed"``, ``"policies"``. ``progress``: a bar of the suites evaluated, on stderr (None: when
+    stderr is a terminal)."""
     out: dict[str, Any] = {}
-    for sc in scenarios or sorted(REGISTRY):
+    scenarios = list(scenarios or sorted(REGISTRY))
+    total = sum(2 + sum(len(find_policies(policies, sc, e)) for e in LEARNED) for sc in scenarios)
+    bar = progress_bar(total, "leaderboard", progress, "suite")
+
+    def evaluate(spec: str, sc: str) -> dict[str, Any]:
+        bar.set_description_str(f"{sc}: {Path(spec).stem}")
+        res = evaluate_suite(spec, sc, episodes, seed, gif=False, generalisation=False)
+        bar.update()
+        return res
+
+    for sc in scenarios:
         seeds = list(range(int(seed), int(seed) + int(episodes)))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             bound = time_lower_bound_seeds(make_engine(sc), seeds)
         rows: dict[str, Any] = {}
         for entry in ("random", "analytic"):
-            res = evaluate(entry, sc, episodes, seed, gif=False, generalisation=False)
+            res = evaluate(entry, sc)
             rows[entry] = {
                 "kind": entry,
                 "metrics": _with_bound(res, bound),
@@ -90,8 +107,7 @@ def leaderboard(
             if not paths:
                 rows[entry] = {"kind": "learned", "metrics": None, "note": "no shipped policy"}
                 continue
-            per_seed = [_with_bound(evaluate(str(p), sc, episodes, seed, gif=False, generalisation=False), bound)
-                        for p in paths]  # fmt: skip
+            per_seed = [_with_bound(evaluate(str(p), sc), bound) for p in paths]
             keys = per_seed[0].keys()
             mean = {k: float(np.nanmean([m[k] for m in per_seed])) if _any_finite(per_seed, k) else float("nan")
                     for k in keys}  # fmt: skip
@@ -105,6 +121,7 @@ def leaderboard(
                 "policies": [p.name for p in paths],
             }
         out[sc] = rows
+    bar.close()
     return {"scenarios": out, "episodes": int(episodes), "seed": int(seed), "policies": str(policies)}
 
 
@@ -183,6 +200,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--policies", default=str(PRETRAINED), help="folder of the shipped learned policies")
     p.add_argument("--scenarios", nargs="*", default=None, choices=sorted(REGISTRY), help="default: every one")
     p.add_argument("--out", default="docs/leaderboard.md", help="the markdown file written")
+    add_progress_argument(p)
 
 
 def run_cli(args: argparse.Namespace) -> int:
@@ -190,7 +208,7 @@ def run_cli(args: argparse.Namespace) -> int:
         raise FileNotFoundError(
             f"--policies must be a folder of learned policies, got {args.policies} (no such folder)"
         )
-    board = leaderboard(args.episodes, args.seed, args.policies, args.scenarios)
+        board = leaderboard(args.episodes, args.seed, args.policies, args.scenarios, progress=args.progress)
     cmd = f"formation-env leaderboard --episodes {args.episodes} --seed {args.seed}"
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(markdown(board, cmd) + "\n## Summary\n\n" + summary_table(board) + "\n")

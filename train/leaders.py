@@ -422,8 +422,10 @@ def _json_flag(parser: argparse.ArgumentParser, flag: str, text: str) -> dict[st
     return value
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m train.leaders", description=__doc__.splitlines()[0])
+def main(argv: Sequence[str] | None = None, prog: str = "python -m train.leaders") -> int:
+    """Parse the flags (``prog`` names the command in help and errors: ``formation-env train`` runs this too),
+    train, and print the run's name, wall time and evaluation as JSON."""
+    p = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     p.add_argument("--config", default=None, help="a training recipe (YAML, train/configs/); flags override it")
     p.add_argument("--algo", choices=["ppo", "sac"], default=None, help="default ppo")
     p.add_argument("--mode", choices=["commander", "shared"], default=None, help="default commander")

@@ -18,7 +18,7 @@ PRETRAINED = POLICY_DIR / "narrow_passage_commander.zip"
 STANDARD_SUITE: dict[str, Any] = {"scenario": "narrow_passage", "episodes": 100, "quick_episodes": 20, "seed": 0}
 
 
-def evaluation_section(out: Path, quick: bool = False) -> list[str]:
+def evaluation_section(out: Path, quick: bool = False, progress: bool | None = False) -> list[str]:
     """Evaluate the analytic planner (and the pretrained policy, if present) on the standard suite.
 
     Writes CSV/JSON/markdown, histograms and GIFs under ``out / "evaluation"``; returns markdown lines.
@@ -31,7 +31,8 @@ def evaluation_section(out: Path, quick: bool = False) -> list[str]:
     folder.mkdir(parents=True, exist_ok=True)
     specs: list[str] = ["analytic"] + ([str(PRETRAINED)] if PRETRAINED.exists() else [])
     results = [
-        evaluate(s, suite["scenario"], n, suite["seed"], out=folder, gif=True, generalisation=True) for s in specs
+        evaluate(s, suite["scenario"], n, suite["seed"], out=folder, gif=True, generalisation=True, progress=progress)
+        for s in specs
     ]
     fig = plot_episodes(results, folder / "comparison.png")
     lines = [

@@ -25,6 +25,7 @@ in metres.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable
 from typing import Any, ClassVar, NamedTuple
 
@@ -56,6 +57,33 @@ def _jit(fn: Callable[..., Any]) -> Any:
     """``fn`` compiled by numba (cached on disk). The kernels run on one thread: on threads they contended with
     numpy's BLAS threads for the same cores and made the batched step slower, not faster."""
     return numba.njit(cache=True)(fn)
+
+
+class _CompileNotice(numba.core.event.Listener):
+    """One line on stderr when numba starts compiling one of this module's kernels, once per process.
+
+    numba fires ``"numba:compile"`` only when a kernel is not in its disk cache yet (the first run after an
+    install or a change of this file); a kernel loaded from the cache fires nothing, so later runs stay silent.
+    """
+
+    shown = False
+
+    def on_start(self, event: Any) -> None:
+        disp = event.data.get("dispatcher") if isinstance(event.data, dict) else None
+        if self.shown or getattr(getattr(disp, "py_func", None), "__module__", None) != __name__:
+            return
+        type(self).shown = True
+        print(
+            "formation-env: compiling the env's step kernels with numba (first run only, cached on disk) ...",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    def on_end(self, event: Any) -> None:
+        return None
+
+
+numba.core.event.register("numba:compile", _CompileNotice())
 
 
 class Capsules(NamedTuple):

@@ -208,7 +208,7 @@ def run_cli(args: argparse.Namespace) -> int:
         raise FileNotFoundError(
             f"--policies must be a folder of learned policies, got {args.policies} (no such folder)"
         )
-        board = leaderboard(args.episodes, args.seed, args.policies, args.scenarios, progress=args.progress)
+    board = leaderboard(args.episodes, args.seed, args.policies, args.scenarios, progress=args.progress)
     cmd = f"formation-env leaderboard --episodes {args.episodes} --seed {args.seed}"
     Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     Path(args.out).write_text(markdown(board, cmd) + "\n## Summary\n\n" + summary_table(board) + "\n")

@@ -147,7 +147,23 @@ class RandomPolicy(Policy):
         return self.rng.uniform(-1.0, 1.0, (B, self.engine.n_l * self.engine.p)).astype(np.float32)
 
 
-class LearnedPolicy(Policy):
+class TrainedPolicy(Policy):
+    """A policy saved with its training config (``config``: scenario, env arguments, ...): it acts in the engine
+    given, or in one built from that config."""
+
+    config: dict[str, Any]
+    _engine: Engine | None
+
+    @property
+    def engine(self) -> Engine:  # type: ignore[override]
+        """The engine it acts in (built from the config's scenario and env arguments when not given)."""
+        if self._engine is None:
+            cfg = self.config
+            self._engine = Engine(str(cfg.get("scenario", "narrow_passage")), **cfg.get("env_kwargs", {}))
+        return self._engine
+
+
+class LearnedPolicy(TrainedPolicy):
     """A saved SB3 model with its VecNormalize statistics and config (``<stem>.zip``,
     ``<stem>_vecnormalize.pkl``, ``<stem>_config.json`` side by side).
 
@@ -169,14 +185,6 @@ class LearnedPolicy(Policy):
         self.maneuver = config.get("action_mode", "leaders") == "maneuver"
         self._command: PoseCommand | None = None
         self._pose: Pose | None = None
-
-    @property
-    def engine(self) -> Engine:  # type: ignore[override]
-        """The engine it acts in (built from the config's scenario and env arguments when not given)."""
-        if self._engine is None:
-            cfg = self.config
-            self._engine = Engine(str(cfg.get("scenario", "narrow_passage")), **cfg.get("env_kwargs", {}))
-        return self._engine
 
     @staticmethod
     def paths(path: str | Path) -> tuple[Path, Path, Path]:
@@ -255,7 +263,7 @@ class LearnedPolicy(Policy):
         return a.reshape(B, engine.n_l, engine.p).astype(np.float64)
 
 
-class RLlibPolicy(Policy):
+class RLlibPolicy(TrainedPolicy):
     """The shared leader policy of an RLlib checkpoint (``python -m train.rllib``; extra ``rllib``).
 
     Every leader acts on its own observation (``Engine.observe``, (obs_dim,)) with one RLModule; the action is
@@ -278,14 +286,6 @@ class RLlibPolicy(Policy):
         self.config = config
         self.name = name
         self._engine = engine
-
-    @property
-    def engine(self) -> Engine:  # type: ignore[override]
-        """The engine it acts in (built from the config's scenario and env arguments when not given)."""
-        if self._engine is None:
-            cfg = self.config
-            self._engine = Engine(str(cfg.get("scenario", "narrow_passage")), **cfg.get("env_kwargs", {}))
-        return self._engine
 
     @staticmethod
     def checkpoint_of(path: str | Path) -> Path | None:

@@ -405,7 +405,18 @@ class Engine:
         actions: ArrayLike,
         rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
     ) -> tuple[EngineState, NDArray[np.float32], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
-        """One sample of every environment.
+        """One sample of every environment: :meth:`advance`, then every leader's observation of the new state."""
+        new, ctx, rew, terminated, truncated, info = self.advance(state, actions, rng)
+        return new, self.observer(ctx), rew, terminated, truncated, info
+
+    def advance(
+        self,
+        state: EngineState,
+        actions: ArrayLike,
+        rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
+    ) -> tuple[EngineState, StepContext, Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
+        """One sample of every environment, without the leaders' observations (what a commander, which reads the
+        global state, needs); :meth:`step` adds them from the returned context.
 
         Args:
             state: the current state (not modified).
@@ -413,8 +424,9 @@ class Engine:
                 ValueError (and nothing changes).
             rng: the generator of observation noise (needed only with ``obs_noise`` > 0), or one per env.
         Returns:
-            (state', obs (B, n_l, obs_dim) float32, rewards (B, n_l), terminated (B,), truncated (B,), info)
-            with the arrays (B,) of ``INFO_KEYS`` (control_effort (B, n_l): |u_i|^2).
+            (state', the step's :class:`StepContext`, rewards (B, n_l), terminated (B,), truncated (B,), info)
+            with the arrays (B,) of ``INFO_KEYS`` (control_effort (B, n_l): |u_i|^2); :meth:`step` returns
+            the observations (B, n_l, obs_dim) float32 in the context's place.
         """
         if not isinstance(state, EngineState):
             raise TypeError(f"state must be an EngineState (from reset), got {type(state).__name__}")
@@ -451,7 +463,7 @@ class Engine:
             "time": k * self.dt,
             "control_effort": np.einsum("blp,blp->bl", u, u),
         }
-        return new, self.observer(ctx), total_reward(ctx, self.reward_weights), terminated, truncated, info
+        return new, ctx, total_reward(ctx, self.reward_weights), terminated, truncated, info
 
     def global_state(self, state: EngineState) -> NDArray[np.float32]:
         """Global state vectors, shape (B, state_dim), float32: positions, velocities, goal positions and

@@ -216,8 +216,9 @@ class FormationVecEnv(VecEnv):
         pose = self.pose
         if self.command is not None and pose is not None:
             pose, a = self.command.step(self.state, pose, a)
-        state, lobs, rew, term, trunc, info = self.engine.step(self.state, a, self._rngs)
+        state, ctx, rew, term, trunc, info = self.engine.advance(self.state, a, self._rngs)
         self.last_info, self.last_terminated, self.last_truncated = info, term, trunc
+        lobs = self.engine.observer(ctx) if self.mode == "shared" else None  # a commander reads the global state
         obs = self._observe(state, lobs, pose=pose)
         rews = (rew.reshape(-1) if k > 1 else rew.mean(axis=1)).astype(np.float32)
         done_env = term | trunc

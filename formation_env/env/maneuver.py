@@ -45,10 +45,6 @@ class Pose(NamedTuple):
         d = self.s.shape[-1]
         return self.R @ ((np.eye(d) + self.H) * self.s[:, None, :])
 
-    def rows(self, index: NDArray[np.int64]) -> Pose:
-        """The poses of environments ``index``."""
-        return Pose(*(f[index] for f in self))
-
     def replace_rows(self, index: NDArray[np.int64], new: Pose) -> Pose:
         """These poses with rows ``index`` taken from ``new`` (auto-resets)."""
         out = [f.copy() for f in self]

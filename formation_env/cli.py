@@ -12,19 +12,6 @@ from typing import Any
 from ._progress import add_progress_argument
 
 
-def parse_env_kwargs(text: str) -> dict[str, Any]:
-    """The ``--env-kwargs`` flag: a JSON object of env arguments ('' for none), else a ValueError naming the flag."""
-    if not text:
-        return {}
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"--env-kwargs must be a JSON object such as '{{\"dt\": 0.05}}': {exc}") from None
-    if not isinstance(value, dict):
-        raise ValueError(f"--env-kwargs must be a JSON object (a dict of env arguments), got {text!r}")
-    return value
-
-
 def _jsonable(summary: dict[str, Any]) -> dict[str, Any]:
     return {k: v for k, v in summary.items() if not k.startswith("_")}
 
@@ -78,10 +65,12 @@ def cmd_rollout(args: argparse.Namespace) -> int:
     """Roll out one episode of a scenario and save it as a GIF or MP4."""
     import numpy as np
 
+    from train.recipes import json_object
+
     from . import formation_v0
     from .env.video import save_animation
 
-    kwargs = parse_env_kwargs(args.env_kwargs)
+    kwargs = json_object("--env-kwargs", args.env_kwargs)
     env = formation_v0.parallel_env(scenario=args.scenario, render_mode="rgb_array", **kwargs)
     obs, _ = env.reset(seed=args.seed)
     policy = None

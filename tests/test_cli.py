@@ -20,7 +20,7 @@ from formation_env.cli import main
         (["evaluate", "--scenario", "maze"], "invalid choice"),
         (["rollout", "--scenario", "maze"], "argument --scenario: invalid choice: 'maze'"),
         (["rollout", "--fps", "0"], "--fps must be a positive integer, got 0"),
-        (["rollout", "--env-kwargs", "[1, 2]"], "--env-kwargs must be a JSON object (a dict of env arguments)"),
+        (["rollout", "--env-kwargs", "[1, 2]"], "--env-kwargs must be a JSON object (a dict of arguments)"),
         (["evaluate", "--env-kwargs", "[]", "--episodes", "2"], "--env-kwargs must be a JSON object"),
         (["leaderboard", "--policies", "no/such/folder"], "--policies must be a folder of learned policies"),
     ],

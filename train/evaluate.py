@@ -41,8 +41,9 @@ from numpy.typing import NDArray
 
 from agents.rollout import reset_paired, run_batch
 from formation_env._progress import add_progress_argument, progress_bar
-from formation_env.cli import parse_env_kwargs
 from formation_env.env.engine import Engine
+
+from .recipes import json_object
 
 __all__ = ["METRIC_KEYS", "evaluate", "mean_ci", "paired_difference", "reset_paired", "run_batch", "wilson"]
 
@@ -360,7 +361,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 def run_cli(args: argparse.Namespace) -> int:
     """Run an evaluation from parsed arguments; print JSON or a table."""
-    kw = parse_env_kwargs(getattr(args, "env_kwargs", "")) or None
+    kw = json_object("--env-kwargs", getattr(args, "env_kwargs", "")) or None
     res = evaluate(
         args.policy, args.scenario, args.episodes, args.seed, env_kwargs=kw, out=args.out, progress=args.progress
     )

@@ -42,7 +42,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor, VecNormalize
 
-from .recipes import load_recipe
+from .recipes import json_object, load_recipe
 
 __all__ = [
     "ALGO_DEFAULTS",
@@ -414,12 +414,9 @@ def train(
 def _json_flag(parser: argparse.ArgumentParser, flag: str, text: str) -> dict[str, Any]:
     """The JSON object given to ``flag``; a usage error (exit 2) naming the flag otherwise."""
     try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        parser.error(f"{flag} must be a JSON object: {exc}")
-    if not isinstance(value, dict):
-        parser.error(f"{flag} must be a JSON object, got {type(value).__name__}")
-    return value
+        return json_object(flag, text)
+    except ValueError as exc:
+        parser.error(str(exc))
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "python -m train.leaders") -> int:

@@ -1,7 +1,9 @@
-"""Training recipes as YAML files (``train/configs/``), shared by ``train.leaders`` and ``train.rllib``."""
+"""Training recipes as YAML files (``train/configs/``) and the JSON flags that override them, shared by
+``train.leaders``, ``train.rllib``, ``train.evaluate`` and the ``formation-env`` CLI."""
 
 from __future__ import annotations
 
+import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -22,3 +24,16 @@ def load_recipe(path: str | Path, keys: Sequence[str]) -> dict[str, Any]:
     if unknown:
         raise ValueError(f"--config: {p} has unknown keys {unknown}; allowed: {list(keys)}")
     return cfg
+
+
+def json_object(flag: str, text: str) -> dict[str, Any]:
+    """The JSON object given to ``flag`` ({} for ''); a ValueError naming the flag if ``text`` is not one."""
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{flag} must be a JSON object such as '{{\"dt\": 0.05}}': {exc}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{flag} must be a JSON object (a dict of arguments), got {text!r}")
+    return value

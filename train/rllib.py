@@ -28,7 +28,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from .recipes import load_recipe
+from .recipes import json_object, load_recipe
 
 #: PPO settings over RLlib's defaults (a recipe's ``algo_kwargs`` and the flags override them).
 PPO_DEFAULTS: dict[str, Any] = {
@@ -110,9 +110,9 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
     env_kwargs = dict(cfg.get("env_kwargs") or {})
     if args.env_kwargs:
         try:
-            env_kwargs.update(json.loads(args.env_kwargs))
-        except json.JSONDecodeError as exc:
-            ap.error(f"--env-kwargs is not valid JSON: {exc}")
+            env_kwargs.update(json_object("--env-kwargs", args.env_kwargs))
+        except ValueError as exc:
+            ap.error(str(exc))
     iterations = args.iterations if args.iterations is not None else (2 if args.smoke else cfg.get("iterations", 100))
     runners = args.num_env_runners if args.num_env_runners is not None else int(cfg.get("num_env_runners", 0))
     if iterations < 1 or runners < 0:

@@ -214,6 +214,13 @@ class LearnedPolicy(TrainedPolicy):
 
     def _norm(self, obs: NDArray[np.floating]) -> NDArray[np.float32]:
         o = np.asarray(obs, dtype=np.float32)
+        want = self.model.observation_space.shape
+        if tuple(want) != o.shape[-1:]:
+            where = f"the {self._engine.scenario_name!r} engine" if self._engine is not None else "the env"
+            raise ValueError(
+                f"the policy takes observations of shape {tuple(want)}, {where} gives {o.shape[-1:]}: evaluate it on "
+                f"its training scenario ({self.config.get('scenario', 'see its config.json')!r}) and sensing arguments"
+            )
         if self.vecnorm is not None and getattr(self.vecnorm, "norm_obs", False):
             o = np.asarray(self.vecnorm.normalize_obs(o), dtype=np.float32)
         return o

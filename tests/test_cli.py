@@ -23,6 +23,17 @@ from formation_env.cli import main
         (["rollout", "--env-kwargs", "[1, 2]"], "--env-kwargs must be a JSON object (a dict of arguments)"),
         (["evaluate", "--env-kwargs", "[]", "--episodes", "2"], "--env-kwargs must be a JSON object"),
         (["leaderboard", "--policies", "no/such/folder"], "--policies must be a folder of learned policies"),
+        (
+            [
+                "evaluate",
+                "--policy",
+                "agents/pretrained/maneuver_ppo_commander_seed0.zip",
+                "--scenario",
+                "obstacle_field",
+            ],
+            "the policy takes observations of shape (46,), the 'obstacle_field' engine gives (64,): evaluate it on its "
+            "training scenario ('maneuver')",
+        ),
     ],
 )
 def test_user_errors_exit_2_with_one_line(argv, match, capsys):
@@ -32,6 +43,16 @@ def test_user_errors_exit_2_with_one_line(argv, match, capsys):
         rc = exc.code
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and match in err[-1] and "Traceback" not in "\n".join(err)
+
+
+def test_evaluate_runs_a_saved_policy_on_its_training_scenario(capsys) -> None:
+    """Without ``--scenario`` a saved policy meets the suite of the scenario it was trained on."""
+    import json
+
+    assert main(["evaluate", "--policy", "agents/pretrained/maneuver_ppo_commander_seed0.zip", "--episodes", "2",
+                 "--json"]) == 0  # fmt: skip
+    out = json.loads(capsys.readouterr().out)
+    assert out["scenario"] == "maneuver" and out["metrics"]["success_rate"] == 1.0
 
 
 def test_debug_shows_the_traceback():

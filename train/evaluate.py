@@ -138,17 +138,19 @@ def summarise(res: dict[str, Any]) -> tuple[dict[str, float], dict[str, list[flo
 SENSING_KWARGS = ("observation", "k_nearest", "sense_radius", "obs_noise", "n_rays", "n_nearest", "sensor_range")
 
 
-def sensing_kwargs(path: str | Path) -> dict[str, Any]:
-    """The :data:`SENSING_KWARGS` of a saved policy's training config (an SB3 ``.zip`` or an RLlib checkpoint
-    folder; none when it has no config)."""
+def training_config(path: str | Path) -> dict[str, Any]:
+    """The training config of a saved policy (an SB3 ``.zip`` or an RLlib checkpoint folder; {} without one)."""
     from agents.policy import LearnedPolicy, RLlibPolicy
 
     if RLlibPolicy.checkpoint_of(path) is not None:
-        cfg = RLlibPolicy.config_of(path)
-    else:
-        cp = LearnedPolicy.paths(path)[2]
-        cfg = json.loads(cp.read_text()) if cp.exists() else {}
-    return {k: v for k, v in cfg.get("env_kwargs", {}).items() if k in SENSING_KWARGS}
+        return RLlibPolicy.config_of(path)
+    cp = LearnedPolicy.paths(path)[2]
+    return json.loads(cp.read_text()) if cp.exists() else {}
+
+
+def sensing_kwargs(path: str | Path) -> dict[str, Any]:
+    """The :data:`SENSING_KWARGS` of a saved policy's training config (none when it has no config)."""
+    return {k: v for k, v in training_config(path).get("env_kwargs", {}).items() if k in SENSING_KWARGS}
 
 
 def make_engine(scenario: str, env_kwargs: dict[str, Any] | None = None) -> Engine:
@@ -167,7 +169,7 @@ def gap_engine(gap_width: tuple[float, float], env_kwargs: dict[str, Any] | None
 
 def evaluate(
     policy_spec: str | Any,
-    scenario: str = "narrow_passage",
+    scenario: str | None = None,
     episodes: int = 100,
     seed: int = 0,
     *,
@@ -180,6 +182,7 @@ def evaluate(
     """Evaluate a policy on the seeded suite ``seed .. seed + episodes - 1`` of ``scenario``.
 
     Args:
+        scenario: a scenario name; None: a saved policy's training scenario, else ``narrow_passage``.
         policy_spec: ``"analytic"``, ``"random"``, a path to a saved SB3 model (.zip), an RLlib checkpoint folder
             (``python -m train.rllib``'s ``--out`` or its ``checkpoint/``), or a :class:`agents.policy.Policy`.
         env_kwargs: engine arguments (scenario keyword arguments included).
@@ -195,6 +198,8 @@ def evaluate(
     saved = isinstance(policy_spec, (str, Path)) and (
         str(policy_spec).endswith(".zip") or RLlibPolicy.checkpoint_of(policy_spec) is not None
     )
+    if scenario is None:
+        scenario = str(training_config(policy_spec).get("scenario", "narrow_passage")) if saved else "narrow_passage"
     if env_kwargs is None and saved:
         env_kwargs = sensing_kwargs(policy_spec)
     engine = make_engine(scenario, env_kwargs)
@@ -350,7 +355,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         default="analytic",
         help="analytic, random, a saved SB3 model's .zip path, or an RLlib checkpoint folder (train.rllib --out)",
     )
-    p.add_argument("--scenario", default="narrow_passage", choices=sorted(REGISTRY))
+    p.add_argument(
+        "--scenario", default=None, choices=sorted(REGISTRY),
+        help="default: a saved policy's training scenario, else narrow_passage",
+    )  # fmt: skip
     p.add_argument("--episodes", type=int, default=100, help="episodes of the suite")
     p.add_argument("--seed", type=int, default=0, help="first episode seed of the suite")
     p.add_argument("--json", action="store_true", help='print one JSON object {"metrics": {...}}')
@@ -367,6 +375,7 @@ def run_cli(args: argparse.Namespace) -> int:
     )
     if args.json:
         blob = {
+            "scenario": res["scenario"],
             "metrics": res["metrics"],
             "ci95": res["ci95"],
             "worst": res["worst"],

@@ -167,3 +167,30 @@ def test_readme_shows_the_leaderboards_table() -> None:
     assert table[0].startswith("| scenario |") and len(table) == 2 + len(REGISTRY)
     readme = (root / "README.md").read_text()
     assert "\n".join(table) in readme
+
+
+SHIPPED = sorted(Path("agents/pretrained").glob("*_config.json"))
+
+
+@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.name[: -len("_config.json")])
+def test_shipped_policy_is_what_its_recorded_command_trains(path: Path) -> None:
+    """Every shipped policy's config is what its recorded command (its recipe and flags, read as they are today)
+    asks for: a recipe edited after a policy was shipped fails here until the policy is retrained."""
+    import json
+    import shlex
+
+    from formation_env.env.versions import with_version
+    from train.leaders import parse_run
+
+    shipped = json.loads(path.read_text())
+    argv = shlex.split(shipped["command"])
+    assert argv[:3] == ["python", "-m", "train.leaders"], shipped["command"]
+    run = parse_run(argv[3:])
+    assert run["config_file"] == shipped.get("config_file")
+    defaults = {"algo": "ppo", "mode": "commander", "scenario": "narrow_passage", "timesteps": 100_000, "seed": 0,
+                "n_envs": 16, "residual": 0.0, "action_mode": "leaders", "range_curriculum": None}  # fmt: skip
+    for key, default in defaults.items():
+        assert json.loads(json.dumps(run.get(key, default))) == shipped.get(key, default), key
+    assert with_version(run.get("env_version", 0), run.get("env_kwargs", {})) == shipped["env_kwargs"]
+    assert run.get("algo_kwargs", {}).items() <= shipped.get("algo_kwargs", {}).items()
+    assert run.get("policy_kwargs", {}).items() <= shipped.get("sb3_policy_kwargs", {}).items()

@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import shlex
 import sys
 import time
 from collections.abc import Sequence
@@ -381,7 +382,7 @@ def train(
         "env_kwargs": env_kwargs,
         "observation": "global_state" if mode == "commander" else "leader_observation",
         "wall_time_s": round(wall, 1),
-        "command": "python -m train.leaders " + " ".join(sys.argv[1:]) if sys.argv[0].endswith("leaders.py") else "",
+        "command": "python -m train.leaders " + shlex.join(sys.argv[1:]) if sys.argv[0].endswith("leaders.py") else "",
         "algo_kwargs": hp,
         "sb3_policy_kwargs": pk,
         "config_file": config_file,
@@ -419,9 +420,9 @@ def _json_flag(parser: argparse.ArgumentParser, flag: str, text: str) -> dict[st
         parser.error(str(exc))
 
 
-def main(argv: Sequence[str] | None = None, prog: str = "python -m train.leaders") -> int:
-    """Parse the flags (``prog`` names the command in help and errors: ``formation-env train`` runs this too),
-    train, and print the run's name, wall time and evaluation as JSON."""
+def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.leaders") -> dict[str, Any]:
+    """The :func:`train` arguments of a command line: the recipe (``--config``), then the flags over it (``prog``
+    names the command in help and errors). A bad flag is a usage error (SystemExit 2) naming it."""
     p = argparse.ArgumentParser(prog=prog, description=__doc__.splitlines()[0])
     p.add_argument("--config", default=None, help="a training recipe (YAML, train/configs/); flags override it")
     p.add_argument("--algo", choices=["ppo", "sac"], default=None, help="default ppo")
@@ -475,7 +476,13 @@ def main(argv: Sequence[str] | None = None, prog: str = "python -m train.leaders
         if len(cur) != 2:
             p.error(f"--curriculum must be FACTOR:FRACTION, got {a.curriculum!r}")
         cfg["curriculum"] = cur
-    config = train(out=a.out, smoke=a.smoke, config_file=a.config, **cfg)
+    return {**cfg, "out": a.out, "smoke": a.smoke, "config_file": a.config}
+
+
+def main(argv: Sequence[str] | None = None, prog: str = "python -m train.leaders") -> int:
+    """Parse the flags (``formation-env train`` runs this too, with its own ``prog``), train, and print the run's
+    name, wall time and evaluation as JSON."""
+    config = train(**parse_run(argv, prog))
     print(json.dumps({k: config[k] for k in ("name", "wall_time_s", "eval")}, indent=2))
     return 0
 

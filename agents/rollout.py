@@ -13,8 +13,13 @@ import numpy as np
 from numpy.typing import NDArray
 
 from formation_env.env.engine import Engine, EngineState
+from formation_env.env.obstacles import pair_clearance
 
-__all__ = ["ActFn", "reset_paired", "run_batch"]
+__all__ = ["ENDINGS", "ActFn", "reset_paired", "run_batch"]
+
+#: How an episode ends (``run_batch``'s ``ending``): the success test held; a contact of two agents; a contact with
+#: an obstacle (at a sample or along the step); an agent left the world box; none of these by the last sample.
+ENDINGS = ("success", "agents", "obstacle", "world_box", "timeout")
 
 Array = NDArray[np.float64]
 
@@ -41,7 +46,9 @@ def run_batch(
     after every batched step (a progress bar's ``update``).
 
     Returns per-episode arrays (B,): success, collision (bool), time_to_goal (s, nan if none),
-    mean_formation_err, max_formation_err, min_clearance (m), control_effort, steps.
+    mean_formation_err, max_formation_err, min_clearance (m), control_effort, steps, and ``ending`` (str, one of
+    :data:`ENDINGS`; a collision is ``world_box`` if an agent left the box, else ``agents`` if two agents touch at
+    that sample, else ``obstacle``).
     """
     state = reset_paired(engine, seeds)
     B = state.batch_size
@@ -56,6 +63,7 @@ def run_batch(
     n_samples = np.zeros(B)
     clear = np.full(B, np.inf)
     effort = np.zeros(B)
+    ending = np.full(B, "timeout", dtype=object)
     frames: list[dict[str, Any]] = []
     trail: list[Array] = []
     if record is not None:
@@ -74,7 +82,11 @@ def run_batch(
         newly = live & info["success"]
         t_goal[newly & np.isnan(t_goal)] = info["time"][newly & np.isnan(t_goal)]
         success |= newly
-        collision |= live & info["collision"]
+        hit = live & info["collision"]
+        if hit.any():
+            touch = pair_clearance(state.pos, engine._pi, engine._pj) < 2.0 * engine.agent_radius
+            ending[hit] = np.where(info["out_of_bounds"], "world_box", np.where(touch, "agents", "obstacle"))[hit]
+        collision |= hit
         if record is not None and not done[record]:
             trail.append(state.pos[record].copy())
             frames.append(engine.frame(state, record, np.array(trail[-60:])))
@@ -86,6 +98,7 @@ def run_batch(
             break
     if not engine.scenario.terminate_on_success:  # judged at the last sample (e.g. maneuver)
         success = success & info["success"]
+    ending[success & ~collision] = "success"
     return {
         "success": success & ~collision,
         "collision": collision,
@@ -95,5 +108,6 @@ def run_batch(
         "min_clearance": clear,
         "control_effort": effort,
         "steps": n_samples,
+        "ending": ending.astype(str),
         "frames": frames,
     }

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from agents.rollout import reset_paired, run_batch
+from agents.rollout import ENDINGS, reset_paired, run_batch
 from formation_env._progress import add_progress_argument, progress_bar
 from formation_env.env.engine import Engine
 
@@ -191,7 +191,8 @@ def evaluate(
         progress: a progress bar of the suite's steps on stderr (None: when stderr is a terminal).
     Returns:
         ``{"metrics": {METRIC_KEYS...}, "ci95": {...}, "worst": {...}, "episodes": n, "seeds": [...], "policy": name,
-        "scenario": ..., "per_episode": {...}, "generalisation": {suite: metrics}}``.
+        "scenario": ..., "per_episode": {...}, "endings": {ending: episodes} (``agents.rollout.ENDINGS``),
+        "generalisation": {suite: metrics}}``.
     """
     from agents.policy import RLlibPolicy, load_policy
 
@@ -227,6 +228,7 @@ def evaluate(
         "policy": policy.name,
         "scenario": scenario,
         "per_episode": {k: np.asarray(v).tolist() for k, v in res.items() if k != "frames"},
+        "endings": {e: int(np.sum(res["ending"] == e)) for e in ENDINGS},
     }
     if gen_suites:
         result["generalisation"] = {name: summarise(run(gap_engine(GAP_SUITES[name], env_kwargs)))[0]
@@ -379,11 +381,13 @@ def run_cli(args: argparse.Namespace) -> int:
             "metrics": res["metrics"],
             "ci95": res["ci95"],
             "worst": res["worst"],
+            "endings": res["endings"],
             "generalisation": res.get("generalisation"),
         }
         print(json.dumps(_finite(blob)))
     else:
         print("\n".join(markdown_table([res])))
+        print("endings: " + ", ".join(f"{e} {k}" for e, k in res["endings"].items()))
         for name, m in res.get("generalisation", {}).items():
             print(f"{name}: " + ", ".join(f"{k}={_fmt(v)}" for k, v in m.items()))
     return 0

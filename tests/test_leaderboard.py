@@ -58,6 +58,25 @@ def test_random_policy_is_seeded_and_bounded() -> None:
     assert res["policy"] == "random" and res["metrics"]["success_rate"] == 0.0
 
 
+def test_episode_endings_name_what_ended_each_episode() -> None:
+    """Every episode has one ending, consistent with success and collision; driving every leader left ends in the
+    world box, the planner on hold in success, a random policy among the discs mostly in contacts."""
+    from agents.rollout import ENDINGS
+
+    left = Engine("hold")
+    push = lambda e, s, o: np.tile([-1.0, 0.0], (s.batch_size, e.n_l, 1))  # noqa: E731
+    assert set(run_batch(left, push, [0, 1, 2])["ending"]) == {"world_box"}
+    assert set(run_batch(left, AnalyticPolicy(left).act_engine, [0, 1, 2])["ending"]) == {"success"}
+    field = Engine("obstacle_field")
+    res = run_batch(field, RandomPolicy(field, seed=0).act_engine, list(range(16)))
+    ends = res["ending"]
+    assert set(ends) <= set(ENDINGS) and (ends == "success").tolist() == res["success"].tolist()
+    assert np.isin(ends, ["agents", "obstacle", "world_box"]).tolist() == res["collision"].tolist()
+    assert evaluate("random", "obstacle_field", 16, seed=0, generalisation=False)["endings"] == {
+        e: int(np.sum(ends == e)) for e in ENDINGS
+    }
+
+
 def test_metrics_are_means_and_worst_values_are_apart() -> None:
     res = {
         "success": np.array([True, True, False, False]),

@@ -84,7 +84,7 @@ def run_batch(
         success |= newly
         hit = live & info["collision"]
         if hit.any():
-            touch = pair_clearance(state.pos, engine._pi, engine._pj) < 2.0 * engine.agent_radius
+            touch = pair_clearance(state.pos, engine.pair_i, engine.pair_j) < 2.0 * engine.agent_radius
             ending[hit] = np.where(info["out_of_bounds"], "world_box", np.where(touch, "agents", "obstacle"))[hit]
         collision |= hit
         if record is not None and not done[record]:

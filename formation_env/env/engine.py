@@ -204,10 +204,11 @@ class Engine:
         self.obstacles = self.scenario.obstacles
         self._moving = [ob for ob in self.obstacles if ob.moves()]
         pairs = np.stack(np.triu_indices(n, 1), axis=1) if n <= ALL_PAIRS_UP_TO else fw.edge_array()
-        self._pi, self._pj = (np.ascontiguousarray(pairs[:, c], dtype=np.int64) for c in (0, 1))
+        #: The agent pairs (pair_i[k], pair_j[k]) checked for contact (all up to ALL_PAIRS_UP_TO agents, else edges).
+        self.pair_i, self.pair_j = (np.ascontiguousarray(pairs[:, c], dtype=np.int64) for c in (0, 1))
         self._fast = 2.0 * self.agent_radius / math.sqrt(d)
-        if self._pi.size:
-            gaps = np.linalg.norm(fw.positions[self._pi] - fw.positions[self._pj], axis=1)
+        if self.pair_i.size:
+            gaps = np.linalg.norm(fw.positions[self.pair_i] - fw.positions[self.pair_j], axis=1)
             if gaps.min() < 2.0 * self.agent_radius:
                 warnings.warn(
                     f"agents touch in the nominal formation: the closest pair is {gaps.min():.3g} m apart, less than "
@@ -350,8 +351,8 @@ class Engine:
         """Clearance (B,) m, collision and out-of-bounds (B,) bool of the new positions ``pos`` (B, n, d)."""
         B = pos.shape[0]
         clear = np.full(B, np.inf)
-        if self._pi.size:
-            clear = pair_clearance(pos, self._pi, self._pj) - 2.0 * self.agent_radius
+        if self.pair_i.size:
+            clear = pair_clearance(pos, self.pair_i, self.pair_j) - 2.0 * self.agent_radius
         if caps.a.shape[1]:
             np.minimum(clear, clearance(pos, caps) - self.agent_radius, out=clear)
             caps0 = self.capsules(params, prev.k) if self._moving else caps

@@ -88,13 +88,13 @@ def decode_state(engine: Engine, gs: NDArray[np.floating]) -> EngineState:
     sizes = [n * d] * 4 + [1, d * d, int(engine.scenario.param_low.size)]
     probe = engine.reset(np.random.default_rng(0), 1).params
     sizes += [int(ob.state_bounds(probe[ob.key].shape[1], d, engine.bounds)[0].size) for ob in engine.obstacles]
-    parts = np.split(g, np.cumsum(sizes), axis=1)
+    parts = np.split(g, np.cumsum(sizes + [1]), axis=1)  # ..., time fraction, the state blocks (unused here)
     pos, vel, goal, goal_vel = (a.reshape(B, n, d) for a in parts[:4])
-    err, pv, tfrac = parts[4][:, 0], parts[6], parts[-1][:, 0]
+    err, pv, tfrac = parts[4][:, 0], parts[6], parts[len(sizes)][:, 0]
     k = np.rint(tfrac * engine.max_cycles).astype(np.int64)
     th, b = engine.affine.fit(goal)  # static goals: the least-squares fit of the goal positions
     params: dict[str, Array] = {"goal_theta": th, "goal_b": b, **engine.scenario.decode_params(pv)}
-    for ob, vec in zip(engine.obstacles, parts[7:-1], strict=True):
+    for ob, vec in zip(engine.obstacles, parts[7 : len(sizes)], strict=True):
         dec = ob.decode(vec, engine.dt * k.astype(np.float64), d)
         if dec is not None:
             params[ob.key] = dec
@@ -236,6 +236,8 @@ class LearnedPolicy(TrainedPolicy):
 
     def act(self, observation: NDArray[np.floating]) -> NDArray[np.float32]:
         obs = np.atleast_2d(np.asarray(observation, dtype=np.float32))
+        if self.config.get("central_critic"):  # the actor reads the leader's own part; the critic's is unused
+            obs = np.concatenate([obs, np.zeros((obs.shape[0], self.engine.state_dim), np.float32)], axis=1)
         a = self._raw(obs)
         if self.residual > 0:  # correction of the planner, which reads the state decoded from the observation
             eng = self.engine

@@ -75,6 +75,32 @@ def test_leaders_mode_equals_the_parallel_env():
             break
 
 
+def test_state_blocks_append_what_the_leaders_sense():
+    """``state_blocks``: the commander's state ends with every leader's chosen blocks (noise-free), the planner's
+    decoding of the state is unchanged, and a check_env passes."""
+    from agents.policy import decode_state
+
+    plain = FormationCommanderEnv(scenario="obstacle_field")
+    env = FormationCommanderEnv(scenario="obstacle_field", state_blocks=["obstacles"], obs_noise=0.5)
+    eng = env.engine
+    assert env.observation_space.shape == (plain.observation_space.shape[0] + eng.n_l * eng.n_rays,)
+    env.reset(seed=2)
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        obs, *_ = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
+    rays = eng.observer(eng.context(env._state))[0][:, eng.obs_blocks["obstacles"]]  # without noise
+    np.testing.assert_allclose(obs[-eng.n_l * eng.n_rays :], rays.reshape(-1), atol=1e-6)
+    assert rays.min() < 1.0  # some obstacle is in sight
+    decoded = decode_state(eng, obs[None])
+    np.testing.assert_allclose(decoded.pos, env._state.pos, atol=1e-5)
+    assert decoded.k[0] == 10
+    sb3_check_env(FormationCommanderEnv(scenario="narrow_passage", state_blocks=["task", "obstacles"]), warn=True)
+    with pytest.raises(TypeError, match="state_blocks must be a sequence of block names"):
+        FormationCommanderEnv(scenario="hold", state_blocks="obstacles")
+    with pytest.raises(ValueError, match="state_blocks must name distinct registered blocks"):
+        FormationCommanderEnv(scenario="hold", state_blocks=["rays"])
+
+
 def test_maneuver_mode_scales_the_formation():
     """Commanding a negative y scale rate shrinks the formation along y; the followers keep the affine shape."""
     env = FormationCommanderEnv(scenario="hold", action_mode="maneuver", dynamics="single_integrator")

@@ -64,6 +64,37 @@ def test_maneuver_actions_only_for_commanders() -> None:
 
 
 @pytest.mark.slow
+def test_central_critic_actor_reads_only_the_leaders_observation(tmp_path: Path) -> None:
+    """MAPPO's split: the critic reads [o_i, s], the actor only o_i; training is reproducible, and the loaded
+    policy acts from the leader's own observation."""
+    import torch
+
+    from agents.central_critic import LocalActorPolicy
+
+    kw = {"smoke": True, "n_envs": 2, "eval_episodes": 1, "central_critic": True}
+    cfg = train("ppo", "shared", "narrow_passage", 256, seed=3, out=tmp_path / "a", **kw)
+    train("ppo", "shared", "narrow_passage", 256, seed=3, out=tmp_path / "b", **kw)
+    assert cfg["central_critic"] is True
+    stem = tmp_path / "a" / "narrow_passage_shared.zip"
+    for x, y in zip(_weights(stem), _weights(tmp_path / "b" / "narrow_passage_shared.zip"), strict=True):
+        np.testing.assert_array_equal(x, y)
+    eng = Engine("narrow_passage", **cfg["env_kwargs"])
+    pol = load_policy(stem, eng)
+    net = pol.model.policy
+    assert isinstance(net, LocalActorPolicy) and net.actor_dim == eng.obs_dim
+    obs = torch.as_tensor(np.random.default_rng(0).normal(size=(5, eng.obs_dim + eng.state_dim)), dtype=torch.float32)
+    other = obs.clone()
+    other[:, eng.obs_dim :] += 3.0  # another global state: same actions, other values
+    with torch.no_grad():
+        np.testing.assert_array_equal(net.get_distribution(obs).mode(), net.get_distribution(other).mode())
+        assert not torch.equal(net.predict_values(obs), net.predict_values(other))
+    a = pol.act_engine(eng, reset_paired(eng, [0, 1]))
+    assert a.shape == (2, eng.n_l, eng.p) and np.all(np.abs(a) <= 1.0)
+    with pytest.raises(ValueError, match="shared mode only"):
+        train("ppo", "commander", "narrow_passage", 256, seed=3, out=tmp_path / "c", **kw)
+
+
+@pytest.mark.slow
 def test_same_seed_same_weights(tmp_path: Path) -> None:
     kw = {"smoke": True, "n_envs": 2, "residual": 0.5, "eval_episodes": 1}
     train("ppo", "commander", "narrow_passage", 256, seed=7, out=tmp_path / "a", **kw)

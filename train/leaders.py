@@ -85,7 +85,7 @@ SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
 #: The keys a recipe file may hold (the rest is refused, naming the key).
 CONFIG_KEYS = (
     "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
-    "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum", "action_mode",
+    "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum", "action_mode", "central_critic",
 )  # fmt: skip
 
 
@@ -131,19 +131,24 @@ def make_venv(
     env_kwargs: dict[str, Any],
     residual: float = 0.0,
     action_mode: str = "leaders",
+    central_critic: bool = False,
 ) -> VecEnv:
-    """The raw (un-normalised) training VecEnv of ``mode``, seeded with ``seed``."""
+    """The raw (un-normalised) training VecEnv of ``mode``, seeded with ``seed`` (``central_critic``: shared
+    slots see the global state after their own observation, :class:`agents.central_critic.LocalActorPolicy`)."""
     if action_mode != "leaders" and (mode != "commander" or residual > 0):
         raise ValueError(f"action_mode {action_mode!r} is for commander mode without --residual")
     if mode not in ("commander", "shared"):
         raise ValueError(f"mode must be 'commander' or 'shared', got {mode!r}")
     if residual > 0 and mode != "commander":
         raise ValueError("--residual is for commander mode only")
+    if central_critic and mode != "shared":
+        raise ValueError("--central-critic is for shared mode only")
     from formation_env.env.vector import FormationVecEnv
 
     venv: VecEnv = FormationVecEnv(
-        scenario, num_envs=n_envs, mode=mode, seed=seed, action_mode=action_mode, **env_kwargs
-    )
+        scenario, num_envs=n_envs, mode=mode, seed=seed, action_mode=action_mode, critic_state=central_critic,
+        **env_kwargs,
+    )  # fmt: skip
     return ResidualVecEnv(venv, residual) if residual > 0 else venv
 
 
@@ -287,6 +292,7 @@ def train(
     env_version: int = 0,
     range_curriculum: dict[str, Any] | None = None,
     action_mode: str = "leaders",
+    central_critic: bool = False,
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -307,6 +313,8 @@ def train(
             at the given ranges and reach the scenario's own after ``f`` of the timesteps (:class:`RangeCurriculum`).
         env_version: the env version whose defaults ``env_kwargs`` sit over (:mod:`formation_env.env.versions`;
             1 is ``formation_v1``).
+        central_critic: (shared PPO) the critic reads the global state too, the actor only the leader's own
+            observation (MAPPO's split, :class:`agents.central_critic.LocalActorPolicy`).
     """
     import torch
     from stable_baselines3 import PPO, SAC
@@ -322,7 +330,10 @@ def train(
         n_envs = min(n_envs, 4)
     name = name or f"{scenario}_{mode}"
     t0 = time.time()
-    raw = make_venv(mode, scenario, n_envs, TRAIN_SEED_OFFSET + seed, env_kwargs, residual, action_mode)
+    if central_critic and algo != "ppo":
+        raise ValueError("central_critic is for PPO only")
+    raw = make_venv(mode, scenario, n_envs, TRAIN_SEED_OFFSET + seed, env_kwargs, residual, action_mode, central_critic)
+    base: Any = raw.venv if isinstance(raw, ResidualVecEnv) else raw  # the FormationVecEnv
     venv = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
     pk: dict[str, Any] = {**POLICY_DEFAULTS.get(algo, {}), **(policy_kwargs or {})}
     if algo == "ppo" and residual > 0:
@@ -335,8 +346,13 @@ def train(
     if algo == "ppo":
         hp["batch_size"] = min(int(hp["batch_size"]), int(hp["n_steps"]) * venv.num_envs)
     cls = PPO if algo == "ppo" else SAC
+    policy: Any = "MlpPolicy"
+    if central_critic:
+        from agents.central_critic import LocalActorPolicy
+
+        policy, pk = LocalActorPolicy, {**pk, "actor_dim": base.engine.obs_dim}
     model: Any = cls(
-        "MlpPolicy",
+        policy,
         venv,
         policy_kwargs=pk,
         seed=seed,
@@ -355,7 +371,6 @@ def train(
     if progress_bar is None:
         progress_bar = sys.stdout.isatty() and not smoke
     callbacks: list[BaseCallback] = [curve, ckpt]
-    base = raw.venv if isinstance(raw, ResidualVecEnv) else raw
     if curriculum is not None:
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:
@@ -371,6 +386,7 @@ def train(
         "algo": algo,
         "mode": mode,
         "action_mode": action_mode,
+        "central_critic": bool(central_critic),
         "scenario": scenario,
         "timesteps": int(timesteps),
         "seed": int(seed),
@@ -446,6 +462,10 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         help='episode-draw curriculum over the recipe\'s, e.g. {"start": {"gap_width": [2.4, 3.0]}, "fraction": 0.5}',
     )  # fmt: skip
     p.add_argument("--env-version", type=int, default=None, help="env version of the defaults (0, 1); default 0")
+    p.add_argument(
+        "--central-critic", action="store_true", default=None,
+        help="shared PPO: the critic also reads the global state, the actor only the leader's observation (MAPPO)",
+    )  # fmt: skip
     p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
     p.add_argument(
         "--curriculum",
@@ -459,7 +479,7 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
     except (FileNotFoundError, ValueError) as exc:
         p.error(str(exc))
     keys = ("algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "eval_episodes", "env_version",
-            "action_mode")  # fmt: skip
+            "action_mode", "central_critic")  # fmt: skip
     for key in keys:
         if getattr(a, key) is not None:
             cfg[key] = getattr(a, key)

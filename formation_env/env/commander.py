@@ -19,6 +19,7 @@ from formation_env.core.validation import as_array
 from .engine import Engine, EngineState, StepInfo
 from .formation import SingleEnv
 from .maneuver import Pose, PoseCommand
+from .state import StepContext
 from .versions import with_version
 
 __all__ = ["ACTION_MODES", "FormationCommanderEnv", "versioned"]
@@ -112,9 +113,9 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
         self._pose: Pose | None = None
 
     # ------------------------------------------------------------------ gym API
-    def _obs(self) -> NDArray[np.float32]:
-        """The observation of the current state."""
-        g = self.engine.global_state(self._state_or_raise("step"))[0]
+    def _obs(self, ctx: StepContext | None = None) -> NDArray[np.float32]:
+        """The observation of the current state (``ctx``: the context of the step that made it, if any)."""
+        g = self.engine.global_state(self._state_or_raise("step"), ctx)[0]
         if self.command is None or self._pose is None:
             return g
         return np.concatenate([g, self.command.observe(self._pose)[0].astype(np.float32)])
@@ -143,13 +144,13 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
             leader_a = a.reshape(1, eng.n_l, eng.p)
         else:
             self._pose, leader_a = self.command.step(state, self._pose, a[None])
-        self._state, _, rew, term, trunc, inf = eng.advance(state, leader_a, self.np_random)
+        self._state, ctx, rew, term, trunc, inf = eng.advance(state, leader_a, self.np_random)
         out = StepInfo({key: val[0].item() for key, val in inf.items() if key != "control_effort"})
         out["control_effort"] = float(inf["control_effort"][0].sum())
         terminated, truncated = bool(term[0]), bool(trunc[0])
         self._done = terminated or truncated
         self._show()
-        return self._obs(), float(rew[0].mean()), terminated, truncated, out
+        return self._obs(ctx), float(rew[0].mean()), terminated, truncated, out
 
 
 def versioned(version: int, **kwargs: Any) -> FormationCommanderEnv:

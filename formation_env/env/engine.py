@@ -88,6 +88,8 @@ class Engine:
         max_speed: velocity bound (m/s) of observations and state (values beyond are clipped).
         reward_weights: overrides of the scenario's reward weights (keys ``rewards.TERMS``).
         observation: the observation blocks, in order (``observations.OBS_BLOCKS``; None: ``formation_v0``'s).
+        state_blocks: observation blocks of every leader (noise-free) appended to the global state, leader by
+            leader (none by default): a commander then reads what the leaders sense, e.g. ``("obstacles",)``.
         k_nearest: agents in the ``nearest_agents`` block.
         sense_radius: how far a leader sees other agents (``nearest_agents``) and obstacles (m; None: no limit
             beyond ``sensor_range``).
@@ -121,6 +123,7 @@ class Engine:
         max_speed: float = 3.0,
         reward_weights: dict[str, float] | None = None,
         observation: Sequence[str] | None = None,
+        state_blocks: Sequence[str] = (),
         k_nearest: int = 3,
         sense_radius: float | None = None,
         obs_noise: float = 0.0,
@@ -140,12 +143,13 @@ class Engine:
             check_number("sense_radius", sense_radius)
         law_params = check_mapping(law_params, "law_params")
         reward_weights = check_mapping(reward_weights, "reward_weights")
-        if observation is not None and (
-            isinstance(observation, str)
-            or not isinstance(observation, Sequence)
-            or not all(isinstance(name, str) for name in observation)
-        ):
-            raise TypeError(f"observation must be a sequence of block names (or None), got {observation!r}")
+        for arg, names in (("observation", observation), ("state_blocks", state_blocks)):
+            if names is not None and (
+                isinstance(names, str)
+                or not isinstance(names, Sequence)
+                or not all(isinstance(name, str) for name in names)
+            ):
+                raise TypeError(f"{arg} must be a sequence of block names (or None), got {names!r}")
         self.scenario_name = scenario
         cls = REGISTRY[scenario]
         fw, om = config.resolve_framework(framework, omega, cls.default_framework)
@@ -222,6 +226,7 @@ class Engine:
         self.obs_dim = self.observer.dim
         self.obs_low = self.observer.low.astype(np.float32)
         self.obs_high = self.observer.high.astype(np.float32)
+        self.state_observer = Observer(self, tuple(state_blocks), 0.0, "state_blocks") if state_blocks else None
         self._build_state_bounds()
 
     # ------------------------------------------------------------------ construction
@@ -255,6 +260,9 @@ class Engine:
             hi.append(o_hi)
         lo.append([0.0])
         hi.append([1.0])
+        if self.state_observer is not None:
+            lo.append(np.tile(self.state_observer.low, self.n_l))
+            hi.append(np.tile(self.state_observer.high, self.n_l))
         self.state_low = np.concatenate(lo).astype(np.float32)
         self.state_high = np.concatenate(hi).astype(np.float32)
         self._state_lo64 = self.state_low.astype(np.float64)
@@ -466,17 +474,22 @@ class Engine:
         }
         return new, ctx, total_reward(ctx, self.reward_weights), terminated, truncated, info
 
-    def global_state(self, state: EngineState) -> NDArray[np.float32]:
+    def global_state(self, state: EngineState, ctx: StepContext | None = None) -> NDArray[np.float32]:
         """Global state vectors, shape (B, state_dim), float32: positions, velocities, goal positions and
         velocities of all agents, formation error, fitted Theta (row-major), the scenario's parameters, the
-        moving obstacles' current state, time fraction."""
+        moving obstacles' current state, time fraction; then the ``state_blocks`` of every leader, if any.
+        ``ctx``: the context of the step that made ``state`` (from :meth:`advance`), if at hand: its affine fit
+        is reused."""
         B = state.batch_size
-        theta = self._fit(state.pos)[0]
+        theta = self._fit(state.pos)[0] if ctx is None else ctx.theta
         t = self.dt * state.k.astype(np.float64)
         parts = [state.pos.reshape(B, -1), state.vel.reshape(B, -1), state.goal.reshape(B, -1)]
         parts += [state.goal_vel.reshape(B, -1), state.err[:, None], theta.reshape(B, -1), state.params["_pvec"]]
         parts += [ob.state_vector(state.params[ob.key], t, self.bounds) for ob in self.obstacles]
         parts.append(state.k[:, None].astype(np.float64) * (1.0 / self.max_cycles))
+        if self.state_observer is not None:
+            blocks = self.state_observer(self.context(state) if ctx is None else ctx)
+            parts.append(blocks.reshape(B, -1).astype(np.float64))
         out = np.concatenate(parts, axis=1)
         np.clip(out, self._state_lo64, self._state_hi64, out=out)
         return out.astype(np.float32)

@@ -244,12 +244,10 @@ register_block(
 class Observer:
     """The engine's chosen blocks, laid out: ``slices`` by name, ``low`` / ``high`` (obs_dim,) float64."""
 
-    def __init__(self, engine: Engine, names: tuple[str, ...], noise: float) -> None:
+    def __init__(self, engine: Engine, names: tuple[str, ...], noise: float, arg: str = "observation") -> None:
         unknown = [nm for nm in names if nm not in OBS_BLOCKS]
         if unknown or not names or len(set(names)) != len(names):
-            raise ValueError(
-                f"observation must name distinct registered blocks ({sorted(OBS_BLOCKS)}), got {list(names)}"
-            )
+            raise ValueError(f"{arg} must name distinct registered blocks ({sorted(OBS_BLOCKS)}), got {list(names)}")
         self.blocks = [OBS_BLOCKS[nm] for nm in names]
         self.slices: dict[str, slice] = {}
         lows, highs, noisy = [], [], []

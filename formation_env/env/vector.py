@@ -8,6 +8,8 @@ slot layouts:
 mode          slots           observation of a slot                        action of a slot
 ============  ==============  ===========================================  ==========================
 ``shared``    B x n_l         one leader's observation (``obs_dim``,)      that leader's (p,) in [-1, 1]
+``shared``    B x n_l         that, then the global state (``state_dim``)  that leader's (p,)
++ critic_state
 ``commander`` B               the global state (``state_dim``,)            every leader's (n_l p,)
 ``commander`` B               the global state, Theta_c, b_c               pose rates (d (d + 1),)
 + maneuver
@@ -53,6 +55,7 @@ from formation_env.core.validation import as_array, check_int, check_mapping, ch
 
 from .engine import INFO_KEYS, Engine, EngineState
 from .maneuver import Pose, PoseCommand
+from .state import StepContext
 
 __all__ = ["MODES", "FormationVecEnv", "GymnasiumFormationVecEnv"]
 
@@ -76,6 +79,8 @@ class FormationVecEnv(VecEnv):
             of the whole team (:mod:`formation_env.env.maneuver`; the slot's observation is the global state
             followed by the commanded Theta_c and b_c, as ``FormationCommander-v0``).
         maneuver_kwargs: the :class:`~formation_env.env.maneuver.PoseCommand` rates and scale range.
+        critic_state: in ``shared`` mode, each slot's observation is the leader's followed by the global state
+            (``state_dim``), for a centralised critic (``agents.central_critic``; the actor reads the first part).
         **env_kwargs: the ``Engine`` arguments (dynamics, follower_law, dt, max_cycles, framework, ...).
 
     Attributes:
@@ -98,6 +103,7 @@ class FormationVecEnv(VecEnv):
         render_mode: str | None = None,
         action_mode: str = "leaders",
         maneuver_kwargs: dict[str, Any] | None = None,
+        critic_state: bool = False,
         **env_kwargs: Any,
     ) -> None:
         if mode not in MODES:
@@ -115,6 +121,8 @@ class FormationVecEnv(VecEnv):
             raise FormationError(f"action_mode must be 'leaders', or 'maneuver' in commander mode, got {action_mode!r}")
         if check_mapping(maneuver_kwargs, "maneuver_kwargs") and action_mode != "maneuver":
             raise TypeError("maneuver_kwargs is for action_mode='maneuver' only")
+        if critic_state not in (True, False) or (critic_state and mode != "shared"):
+            raise FormationError(f"critic_state must be a bool, True only in shared mode, got {critic_state!r}")
         self.engine = eng = engine if engine is not None else Engine(scenario, **env_kwargs)
         self.command = PoseCommand(eng, **(maneuver_kwargs or {})) if action_mode == "maneuver" else None
         self.pose: Pose | None = None
@@ -122,8 +130,12 @@ class FormationVecEnv(VecEnv):
         self.n_envs = B = int(num_envs)
         self.n_l, self.p = eng.n_l, eng.p
         self.render_mode = render_mode
+        self.critic_state = bool(critic_state)
         if mode == "shared":
-            obs_space = spaces.Box(eng.obs_low, eng.obs_high, dtype=np.float32)
+            low, high = eng.obs_low, eng.obs_high
+            if critic_state:
+                low, high = np.concatenate([low, eng.state_low]), np.concatenate([high, eng.state_high])
+            obs_space = spaces.Box(low, high, dtype=np.float32)
             act_space = spaces.Box(-1.0, 1.0, (eng.p,), dtype=np.float32)
         elif self.command is None:
             obs_space = spaces.Box(eng.state_low, eng.state_high, dtype=np.float32)
@@ -149,15 +161,20 @@ class FormationVecEnv(VecEnv):
         leader_obs: NDArray[np.float32] | None = None,
         rngs: Any = None,
         pose: Pose | None = None,
+        ctx: StepContext | None = None,
     ) -> NDArray[np.float32]:
         """Slot observations (num_envs, obs dim) of ``state`` (``leader_obs``: the step's, if at hand; ``rngs``: the
-        envs' generators, for observation noise; ``pose``: the commanded poses in ``maneuver`` mode)."""
+        envs' generators, for observation noise; ``pose``: the commanded poses in ``maneuver`` mode; ``ctx``: the
+        context of the step that made ``state``, if any)."""
         if self.mode == "commander":
-            g = self.engine.global_state(state)
+            g = self.engine.global_state(state, ctx)
             if self.command is None or pose is None:
                 return g
             return np.concatenate([g, self.command.observe(pose).astype(np.float32)], axis=1)
         lo = self.engine.observe(state, rngs) if leader_obs is None else leader_obs
+        if self.critic_state:
+            g = np.repeat(self.engine.global_state(state, ctx)[:, None], self.n_l, axis=1)
+            lo = np.concatenate([lo, g], axis=2)
         return lo.reshape(state.batch_size * self.n_l, -1)
 
     def _slots(self, envs: NDArray[np.int64]) -> NDArray[np.int64]:
@@ -219,7 +236,7 @@ class FormationVecEnv(VecEnv):
         state, ctx, rew, term, trunc, info = self.engine.advance(self.state, a, self._rngs)
         self.last_info, self.last_terminated, self.last_truncated = info, term, trunc
         lobs = self.engine.observer(ctx) if self.mode == "shared" else None  # a commander reads the global state
-        obs = self._observe(state, lobs, pose=pose)
+        obs = self._observe(state, lobs, pose=pose, ctx=ctx)
         rews = (rew.reshape(-1) if k > 1 else rew.mean(axis=1)).astype(np.float32)
         done_env = term | trunc
         dones = np.repeat(done_env, k) if k > 1 else done_env.copy()

@@ -135,7 +135,8 @@ def summarise(res: dict[str, Any]) -> tuple[dict[str, float], dict[str, list[flo
 
 #: Engine arguments that shape what a policy observes: a learned policy is evaluated with its training values
 #: of these (and the scenario's own success test, whatever its training used).
-SENSING_KWARGS = ("observation", "k_nearest", "sense_radius", "obs_noise", "n_rays", "n_nearest", "sensor_range")
+SENSING_KWARGS = ("observation", "state_blocks", "k_nearest", "sense_radius", "obs_noise", "n_rays", "n_nearest",
+                  "sensor_range")  # fmt: skip
 
 
 def training_config(path: str | Path) -> dict[str, Any]:

@@ -196,6 +196,28 @@ def test_narrow_passage_route_goes_through_the_gap() -> None:
     assert d[0, 1] > straight[0, 1]
 
 
+def test_hold_turn_route_goes_round_the_centroid() -> None:
+    """``Hold(route="turn")``: zero at the goal, the arc for a turn of the goal formation about its centroid,
+    straight for a translation; 2D only."""
+    from formation_env.core.errors import FormationError
+
+    eng = Engine("hold", route="turn")
+    s = eng.reset(np.random.default_rng(0), 1)
+    goal, route = s.goal, eng.scenario.route_distance
+    np.testing.assert_allclose(route(goal, goal, s.params), 0.0, atol=1e-12)
+    c = goal.mean(axis=1, keepdims=True)
+    for deg in (30.0, -120.0, 175.0):
+        a = np.radians(deg)
+        rot = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+        turned = c + (goal - c) @ rot.T
+        np.testing.assert_allclose(route(turned, goal, s.params), np.linalg.norm(goal - c, axis=-1) * abs(a))
+    np.testing.assert_allclose(route(goal + [1.0, -2.0], goal, s.params), np.sqrt(5.0))
+    straight = Engine("hold").scenario.route_distance(goal + [1.0, -2.0], goal, s.params)
+    np.testing.assert_allclose(straight, np.sqrt(5.0))
+    with pytest.raises(FormationError, match="route must be 'straight', or 'turn' in 2D"):
+        Engine("hold", route="turn", framework="bipyramid_3d")
+
+
 def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:
     from train.leaders import RangeCurriculum
 

@@ -8,6 +8,10 @@ Per episode (uniform draws from the seed's generator; ranges are keyword argumen
 * Goal: Theta_g = rotation . shear . diag(scale) with angle in [-pi/2, pi/2], shear of axis 0 by
   axis 1 in [-0.3, 0.3], each scale factor in [0.6, 1.4]; b_g in [-2, 2]^d.
 
+``route="turn"`` (2D) makes the ``approach`` reward's route a turn instead of a straight line: each agent goes
+with the team's centroid, and round it by the team's rotation (see :meth:`Hold.route_distance`). Straight lines
+through the centroid collapse the formation on large rotations; the turn keeps it apart.
+
 ``start="paper"`` reproduces the paper's simulation (Section 4.3) on its 5-agent framework:
 leaders at r_1..r_3, followers at (-4, 3) and (-3, -2), goal the nominal pose (Theta = I, b = 0).
 
@@ -54,6 +58,9 @@ class Hold(Scenario):
         self.goal_angle = check_range("goal_angle", kw.pop("goal_angle", (-np.pi / 2, np.pi / 2)))
         self.goal_scale = check_range("goal_scale", kw.pop("goal_scale", (0.6, 1.4)), lo=1e-9)
         self.goal_shear = check_range("goal_shear", kw.pop("goal_shear", (-0.3, 0.3)))
+        self.route = kw.pop("route", "straight")
+        if self.route not in ("straight", "turn") or (self.route == "turn" and self.d != 2):
+            raise FormationError(f"hold: route must be 'straight', or 'turn' in 2D, got {self.route!r} (d = {self.d})")
 
     def draws(self) -> list[Draw]:
         d, pi = self.d, np.pi
@@ -69,6 +76,22 @@ class Hold(Scenario):
         out += [Draw("axis_g", (3,), "normal")] if axis else []
         out += [Draw("b_g", (d,), bounds=self.goal_b)]
         return out + (self.follower_draws() if self.start == "random" else [])
+
+    def route_distance(self, pos: Array, goal: Array, params: dict[str, Array]) -> Array:
+        """``route="turn"``: the centroid's straight path |c_g - c|, then round the centroid: with p_i = x_i - c,
+        q_i = x_i* - c_g, radius r_i = (|p_i| + |q_i|) / 2 and turn delta_i (from p_i to q_i, on the side of the
+        team's least-squares rotation phi = atan2(sum p_i x q_i, sum p_i . q_i)), the spiral's length
+        sqrt((|q_i| - |p_i|)^2 + (r_i delta_i)^2). Straight lines otherwise. pos, goal (B, m, 2) -> (B, m), m."""
+        if self.route == "straight":
+            return super().route_distance(pos, goal, params)
+        c, cg = pos.mean(axis=1, keepdims=True), goal.mean(axis=1, keepdims=True)
+        p, q = pos - c, goal - cg
+        cross = p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
+        phi = np.arctan2(cross.sum(axis=1), np.einsum("bmd,bmd->b", p, q))[:, None]
+        own = np.arctan2(cross, np.einsum("bmd,bmd->bm", p, q))  # each agent's own turn, in (-pi, pi]
+        delta = phi + (own - phi + np.pi) % (2 * np.pi) - np.pi  # the same turn, taken on the team's side
+        rp, rq = np.linalg.norm(p, axis=-1), np.linalg.norm(q, axis=-1)
+        return np.linalg.norm(cg - c, axis=-1) + np.hypot(rq - rp, 0.5 * (rp + rq) * delta)
 
     def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
         d = self.d

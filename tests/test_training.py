@@ -218,6 +218,17 @@ def test_hold_turn_route_goes_round_the_centroid() -> None:
         Engine("hold", route="turn", framework="bipyramid_3d")
 
 
+def test_hold_rotations_times_each_collision_and_its_rotation() -> None:
+    from train.hold_rotations import collision_times, rotations
+
+    eng, seeds = Engine("hold"), [0, 1, 2, 3]
+    assert np.all(np.isnan(collision_times(eng, "zero", seeds)))  # standing still never collides
+    when = collision_times(eng, "random", seeds)  # random leaders collide in every episode (the leaderboard's 1.00)
+    assert np.all((when > 0) & (when <= eng.max_cycles * eng.dt))
+    angle = rotations(eng, seeds)
+    assert angle.shape == (4,) and np.all((angle >= 0) & (angle <= 180)) and np.ptp(angle) > 1
+
+
 def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:
     from train.leaders import RangeCurriculum
 

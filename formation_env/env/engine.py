@@ -481,15 +481,16 @@ class Engine:
         ``ctx``: the context of the step that made ``state`` (from :meth:`advance`), if at hand: its affine fit
         is reused."""
         B = state.batch_size
+        if ctx is None and self.state_observer is not None:
+            ctx = self.context(state)
         theta = self._fit(state.pos)[0] if ctx is None else ctx.theta
         t = self.dt * state.k.astype(np.float64)
         parts = [state.pos.reshape(B, -1), state.vel.reshape(B, -1), state.goal.reshape(B, -1)]
         parts += [state.goal_vel.reshape(B, -1), state.err[:, None], theta.reshape(B, -1), state.params["_pvec"]]
         parts += [ob.state_vector(state.params[ob.key], t, self.bounds) for ob in self.obstacles]
         parts.append(state.k[:, None].astype(np.float64) * (1.0 / self.max_cycles))
-        if self.state_observer is not None:
-            blocks = self.state_observer(self.context(state) if ctx is None else ctx)
-            parts.append(blocks.reshape(B, -1).astype(np.float64))
+        if self.state_observer is not None and ctx is not None:
+            parts.append(self.state_observer(ctx).reshape(B, -1).astype(np.float64))
         out = np.concatenate(parts, axis=1)
         np.clip(out, self._state_lo64, self._state_hi64, out=out)
         return out.astype(np.float32)

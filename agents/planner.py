@@ -301,7 +301,7 @@ class CrossingPlanner:
        scale max|r_i - mean(r)| + agent radius) ``stage`` m before the first lane's strip, at the goal's y.
     2. Go when the whole crossing is predicted clear at some cruise speed v (``speed`` times 1, 0.8, 0.6 or
        0.45; the fastest clear one): the discs' paths are known (they bounce off the box,
-       :func:`formation_env.env.obstacles.bounce`), and the team's centre is taken anywhere within ``slack`` m
+       :func:`formation_env.env.obstacles.bounce_row`), and the team's centre is taken anywhere within ``slack`` m
        of its predicted profile (from its speed now to v at ``accel`` u_max, then cruising); every disc must
        stay ``margin`` m beyond rho plus its radius. Once the front has entered the strips, keep going (at the
        slowest speed if none is predicted clear any more).
@@ -339,7 +339,7 @@ class CrossingPlanner:
     def __call__(self, engine: Engine, state: EngineState) -> Array:
         """Leader actions in [-1, 1], shape (B, n_l, p)."""
         from formation_env.env.control import track_targets
-        from formation_env.env.obstacles import bounce
+        from formation_env.env.obstacles import MovingCircle
 
         r = engine.scenario.r
         par, pos = state.params, state.pos
@@ -367,7 +367,7 @@ class CrossingPlanner:
             t_cross = (x_hi - np.minimum(centre[:, 0], x_lo) + rho + self.slack) / v + t_a
             clear = np.ones(B, dtype=bool)
             for tau in np.arange(0.0, float(t_cross.max()) + engine.dt, engine.dt):
-                c = bounce(discs[:, :, :2], discs[:, :, 2:4], rad, t_now + tau, engine.bounds)  # (B, M, 2)
+                c = MovingCircle().capsules(discs, t_now + tau, engine.bounds).a  # (B, M, 2)
                 ta = np.minimum(tau, t_a)
                 x_c = centre[:, 0] + v0 * ta + 0.5 * sgn * np.where(np.isfinite(acc), acc, 0.0) * ta**2 + v * (tau - ta)
                 px = np.clip(c[:, :, 0], (x_c - self.slack)[:, None], (x_c + self.slack)[:, None])

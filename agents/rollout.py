@@ -13,7 +13,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from formation_env.env.engine import Engine, EngineState
-from formation_env.env.obstacles import pair_clearance
 
 __all__ = ["ENDINGS", "ActFn", "reset_paired", "run_batch"]
 
@@ -84,7 +83,8 @@ def run_batch(
         success |= newly
         hit = live & info["collision"]
         if hit.any():
-            touch = pair_clearance(state.pos, engine.pair_i, engine.pair_j) < 2.0 * engine.agent_radius
+            gaps = np.linalg.norm(state.pos[:, engine.pair_i] - state.pos[:, engine.pair_j], axis=-1)
+            touch = gaps.min(axis=1, initial=np.inf) < 2.0 * engine.agent_radius
             ending[hit] = np.where(info["out_of_bounds"], "world_box", np.where(touch, "agents", "obstacle"))[hit]
         collision |= hit
         if record is not None and not done[record]:

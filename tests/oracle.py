@@ -23,6 +23,45 @@ def capsule_distance(p, caps: Capsules):
     return np.linalg.norm(diff, axis=-1) - caps.rad[:, None]
 
 
+def nearest_vectors(p, caps: Capsules, k: int, max_range: float):
+    """Proximity vectors to the k nearest capsules (B, l, k, d): unit direction from p (B, l, d) toward the
+    capsule's nearest point, times (1 - surface distance / max_range)^+; missing capsules give 0."""
+    B, l, d = p.shape
+    out = np.zeros((B, l, k, d))
+    m = caps.a.shape[1]
+    if m == 0 or k == 0:
+        return out
+    w = p[:, :, None, :] - caps.a[:, None]
+    ee = np.sum(caps.e * caps.e, axis=-1)[:, None]
+    s = np.clip(np.sum(w * caps.e[:, None], axis=-1) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)
+    diff = w - s[..., None] * caps.e[:, None]
+    surf = np.linalg.norm(diff, axis=-1) - caps.rad[:, None]
+    kk = min(k, m)
+    idx = np.argsort(surf, axis=-1, kind="stable")[..., :kk]
+    toward = -np.take_along_axis(diff, idx[..., None], axis=2)
+    norm = np.linalg.norm(toward, axis=-1)
+    mag = np.clip(1.0 - np.take_along_axis(surf, idx, axis=2) / max_range, 0.0, 1.0)
+    out[:, :, :kk] = toward / np.maximum(norm, 1e-12)[..., None] * mag[..., None]
+    return out
+
+
+def route_lengths(route_row, pvec, radius, pos, goal):
+    """A scenario's compiled route row over a batch: pvec (B, k), pos, goal (B, n, d) -> (B, n) m."""
+    out = np.empty(pos.shape[:2])
+    for b in range(pos.shape[0]):
+        route_row(np.ascontiguousarray(pvec[b], dtype=float), float(radius), np.ascontiguousarray(pos[b], dtype=float),
+                  np.ascontiguousarray(goal[b], dtype=float), out[b])  # fmt: skip
+    return out
+
+
+def phase_distance(eng: Engine, state: EngineState):
+    """Every agent's distance to its goal state in phase space, sqrt(g^2 + |v - v*|^2 (1 s)^2), (B, n), m; g the
+    scenario's route length (the ``approach`` potential)."""
+    g = route_lengths(eng.scenario.route_row, state.params["_pvec"], eng.agent_radius, state.pos, state.goal)
+    ev = state.vel - state.goal_vel
+    return np.sqrt(g * g + np.sum(ev * ev, axis=-1))
+
+
 def path_distance(p0, p1, caps0: Capsules, caps1: Capsules, samples: int = 1001):
     """Smallest distance between each agent's motion and each capsule over a step, by dense sampling of the
     relative motion (B, n, m): an independent check of the closed-form segment-segment distance."""
@@ -111,8 +150,6 @@ def oracle_step(eng: Engine, state: EngineState, actions):
         if d == 2:
             sense = ray_ranges(pos[:, [i]], eng.ray_dirs, caps, eng.obstacle_range)[:, 0] / eng.obstacle_range
         else:
-            from formation_env.env.obstacles import nearest_vectors
-
             sense = nearest_vectors(pos[:, [i]], caps, eng.n_nearest, eng.obstacle_range).reshape(B, -1)
         parts = [
             np.clip(pos[:, i], lo, hi),

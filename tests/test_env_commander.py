@@ -88,7 +88,7 @@ def test_state_blocks_append_what_the_leaders_sense():
     rng = np.random.default_rng(0)
     for _ in range(10):
         obs, *_ = env.step(rng.uniform(-1, 1, env.action_space.shape).astype(np.float32))
-    rays = eng.observer(eng.context(env._state))[0][:, eng.obs_blocks["obstacles"]]  # without noise
+    rays = eng.observe(env._state)[0][:, eng.obs_blocks["obstacles"]]  # without noise
     np.testing.assert_allclose(obs[-eng.n_l * eng.n_rays :], rays.reshape(-1), atol=1e-6)
     assert rays.min() < 1.0  # some obstacle is in sight
     decoded = decode_state(eng, obs[None])

@@ -19,7 +19,7 @@ from formation_env.core.dynamics import LinearDynamics
 from formation_env.core.errors import FormationError, StabilityWarning
 from formation_env.env import config, obstacles
 from formation_env.env.engine import INFO_KEYS, Engine, offered_combinations
-from formation_env.env.obstacles import Capsules, MovingCircle, bounce
+from formation_env.env.obstacles import Capsules, MovingCircle
 from formation_env.env.scenarios import REGISTRY
 
 SCENARIOS = sorted(REGISTRY)
@@ -74,7 +74,7 @@ def test_step_matches_the_numpy_oracle(combo):
             s = Engine.replace_rows(s, done, eng.reset_each([np.random.default_rng(int(b) + 7) for b in done]))
 
 
-def test_geometry_kernels_match_the_oracle():
+def test_geometry_rows_match_the_oracle():
     rng = np.random.default_rng(1)
     B, n, m = 5, 7, 6
     for d in (2, 3):
@@ -83,19 +83,18 @@ def test_geometry_kernels_match_the_oracle():
         rad = rng.uniform(0, 0.5, (B, m)) * (rng.random((B, m)) < 0.7)  # some of radius 0 (walls)
         caps = Capsules(a, e, rad)
         p0, p1 = rng.uniform(-3, 3, (B, n, d)), rng.uniform(-3, 3, (B, n, d))
-        np.testing.assert_allclose(obstacles.clearance(p0, caps), capsule_distance(p0, caps).min(axis=(1, 2)))
-        caps1 = Capsules(a + rng.uniform(-0.5, 0.5, (B, m, d)), e, rad)
-        ref = path_distance(p0, p1, caps, caps1).min(axis=(1, 2))
-        got = obstacles.path_clearance(p0, p1, caps, caps1)
+        got = [obstacles.point_clearance(p0[b], a[b], e[b], rad[b]) for b in range(B)]
+        np.testing.assert_allclose(got, capsule_distance(p0, caps).min(axis=(1, 2)))
+        a1 = a + rng.uniform(-0.5, 0.5, (B, m, d))
+        ref = path_distance(p0, p1, caps, Capsules(a1, e, rad)).min(axis=(1, 2))
+        got = np.array([obstacles.path_clearance(p0[b], p1[b], a[b], a1[b], e[b], rad[b]) for b in range(B)])
         assert np.all(got <= ref + 1e-12) and np.all(got >= ref - 5e-3)  # sampling overestimates by < 5 mm
     o = rng.uniform(-3, 3, (B, 3, 2))
     caps2 = Capsules(rng.uniform(-2, 2, (B, m, 2)), rng.uniform(-1, 1, (B, m, 2)), rng.uniform(0, 0.4, (B, m)))
     u = obstacles.ray_directions(16)
-    np.testing.assert_allclose(obstacles.ray_ranges(o, u, caps2, 3.0), ray_ranges(o, u, caps2, 3.0), atol=2e-3)
-    # a row's numbers do not depend on the batch around it
-    big = np.concatenate([o] * 64), Capsules(*(np.concatenate([f] * 64) for f in caps2))
-    np.testing.assert_array_equal(obstacles.ray_ranges(*big[:1], u, big[1], 3.0)[:B],
-                                  obstacles.ray_ranges(o, u, caps2, 3.0))  # fmt: skip
+    got = np.array([[[obstacles.ray_range(*o[b, i], *u[k], caps2.a[b], caps2.e[b], caps2.rad[b], 3.0)
+                      for k in range(16)] for i in range(3)] for b in range(B)])  # fmt: skip
+    np.testing.assert_allclose(got, ray_ranges(o, u, caps2, 3.0), atol=2e-3)
 
 
 def test_moving_circles_bounce_inside_the_box():
@@ -107,8 +106,8 @@ def test_moving_circles_bounce_inside_the_box():
     assert c[:, 1].max() == pytest.approx(4.5, abs=1e-3) and c[:, 1].min() == pytest.approx(-4.5, abs=1e-3)
     speed = np.linalg.norm(np.diff(c, axis=0), axis=1) / np.diff(ts)[0]
     np.testing.assert_allclose(np.median(speed), np.hypot(0.3, 1.0), rtol=1e-6)
-    np.testing.assert_allclose(bounce(np.array([[[0.0, 4.0]]]), np.array([[[0.0, 1.0]]]), np.array([[0.5]]),
-                                      np.array([1.0]), bounds)[0, 0], [0.0, 4.0])  # 4 -> 4.5, back to 4 # fmt: skip
+    disc = np.array([[[0.0, 4.0, 0.0, 1.0, 0.5]]])
+    np.testing.assert_allclose(mc.capsules(disc, np.array([1.0]), bounds).a[0, 0], [0.0, 4.0])  # 4 -> 4.5, back to 4
     vel = mc.velocity(p, np.array([1.0]), bounds)[0, 0]
     np.testing.assert_allclose(vel, [0.3, -1.0])  # after the bounce off y = 4.5
 

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from oracle import route_lengths
 
 from agents.policy import LearnedPolicy, load_policy
 from formation_env.env.engine import Engine
@@ -164,7 +165,9 @@ def test_tolerance_reward_term_pays_while_the_success_test_holds() -> None:
 
 def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -> None:
     """Summed over steps it telescopes to the agents' mean of log(eps + s_start) - log(eps + s_end)."""
-    from formation_env.env.rewards import EPS_APPROACH, phase_distance
+    from oracle import phase_distance
+
+    from formation_env.env.rewards import EPS_APPROACH
 
     eng = Engine("hold", reward_weights={"approach": 1.0, "progress": 0, "formation": 0, "effort": 0, "distance": 0})
     s0 = s = eng.reset(np.random.default_rng(1), 1)
@@ -173,10 +176,10 @@ def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -
     for _ in range(20):
         s, _, r, *_ = eng.step(s, rng.uniform(-1, 1, (1, eng.n_l, eng.p)))
         total += r
-    expect = np.log(EPS_APPROACH + phase_distance(s0, eng)) - np.log(EPS_APPROACH + phase_distance(s, eng))
+    expect = np.log(EPS_APPROACH + phase_distance(eng, s0)) - np.log(EPS_APPROACH + phase_distance(eng, s))
     np.testing.assert_allclose(total, np.broadcast_to(expect.mean(axis=1, keepdims=True), total.shape), rtol=1e-9)
     at_rest_on_goal = s0._replace(pos=s0.goal, vel=np.zeros_like(s0.vel))
-    np.testing.assert_allclose(phase_distance(at_rest_on_goal, eng), 0.0)
+    np.testing.assert_allclose(phase_distance(eng, at_rest_on_goal), 0.0)
 
 
 def test_narrow_passage_route_goes_through_the_gap() -> None:
@@ -184,10 +187,10 @@ def test_narrow_passage_route_goes_through_the_gap() -> None:
     gap or beyond the wall it is the straight line."""
     eng = Engine("narrow_passage")
     sc = eng.scenario
-    params = {"wall_x": np.array([0.0]), "gap_center": np.array([1.0]), "gap_width": np.array([1.0])}
+    pvec = np.array([[0.0, 1.0, 1.0]])  # wall_x, gap_center, gap_width
     goal = np.array([[[4.0, 1.0], [4.0, -2.0], [4.0, 1.0]]])
     pos = np.array([[[-4.0, 1.0], [-4.0, -2.0], [1.0, -3.0]]])
-    d = sc.route_distance(pos, goal, params)
+    d = route_lengths(sc.route_row, pvec, sc.agent_radius, pos, goal)
     straight = np.linalg.norm(goal - pos, axis=-1)
     np.testing.assert_allclose(d[0, [0, 2]], straight[0, [0, 2]])  # aligned with the gap; beyond the wall
     room = 0.5 - sc.agent_radius - 0.05
@@ -203,7 +206,11 @@ def test_hold_turn_route_goes_round_the_centroid() -> None:
 
     eng = Engine("hold", route="turn")
     s = eng.reset(np.random.default_rng(0), 1)
-    goal, route = s.goal, eng.scenario.route_distance
+    goal = s.goal
+
+    def route(pos, goal, _params, row=eng.scenario.route_row):
+        return route_lengths(row, np.zeros((1, 0)), eng.agent_radius, pos, goal)
+
     np.testing.assert_allclose(route(goal, goal, s.params), 0.0, atol=1e-12)
     c = goal.mean(axis=1, keepdims=True)
     for deg in (30.0, -120.0, 175.0):
@@ -212,7 +219,7 @@ def test_hold_turn_route_goes_round_the_centroid() -> None:
         turned = c + (goal - c) @ rot.T
         np.testing.assert_allclose(route(turned, goal, s.params), np.linalg.norm(goal - c, axis=-1) * abs(a))
     np.testing.assert_allclose(route(goal + [1.0, -2.0], goal, s.params), np.sqrt(5.0))
-    straight = Engine("hold").scenario.route_distance(goal + [1.0, -2.0], goal, s.params)
+    straight = route(goal + [1.0, -2.0], goal, s.params, Engine("hold").scenario.route_row)
     np.testing.assert_allclose(straight, np.sqrt(5.0))
     with pytest.raises(FormationError, match="route must be 'straight', or 'turn' in 2D"):
         Engine("hold", route="turn", framework="bipyramid_3d")

@@ -30,9 +30,21 @@ from formation_env.core.validation import as_array, check_mapping
 
 from . import config
 from .config import DYNAMICS, FOLLOWER_LAWS, check_combination, offered_combinations, resolve_dynamics
+from .kernel import (
+    FLAG_COLLISION,
+    FLAG_OOB,
+    FLAG_SUCCESS,
+    FLAG_TERMINATED,
+    FLAG_TRUNCATED,
+    Consts,
+    Episode,
+    Outputs,
+    compose,
+    fit_rows,
+)
 from .observations import DEFAULT_OBSERVATION, Observer
-from .obstacles import Capsules, clearance, pair_clearance, path_clearance, ray_directions
-from .rewards import REWARD_TERMS, TERMS, total_reward
+from .obstacles import Capsules, ray_directions
+from .rewards import REWARD_TERMS, TERMS
 from .scenarios import REGISTRY
 from .scenarios._base import Scenario, affine_batch, check_number
 from .state import EngineState, StepContext, StepInfo
@@ -54,6 +66,11 @@ Array = NDArray[np.float64]
 
 #: Above this many agents, agent-agent contacts are checked along the graph's edges only.
 ALL_PAIRS_UP_TO = 64
+#: From this batch size on, the compiled step runs its rows on numba's threads.
+PARALLEL_FROM = 64
+#: Placeholders of the compiled step's optional inputs (no law state given, no observation noise).
+_NO_STATE = np.zeros((0, 0, 0))
+_NO_NOISE = np.zeros((0, 0, 0))
 #: The fields of ``EngineState`` but ``params`` (the last).
 _FIELDS = EngineState._fields[:-1]
 #: The info entries of a step (arrays (B,) from :meth:`Engine.step`), with their units.
@@ -196,7 +213,7 @@ class Engine:
         self._CA_T = np.ascontiguousarray((dyn.C @ dyn.A).T) if self._vel_from_state else None
         self._at_rest = np.linalg.pinv(dyn.C).T  # x at rest from positions
         self.affine = AffineImage(fw.positions)
-        self._H = np.hstack([fw.positions, np.ones((n, 1))])  # [r, 1] (n, d + 1)
+        self._pinv = np.ascontiguousarray(self.affine._pinv)  # (d + 1, n)
         self.v_bound: float = max(float(max_speed), self.u_max if self.kind == "single_integrator" else 0.0)
         self.bounds: Array = self.scenario.bounds
         self.n_rays: int = int(n_rays)
@@ -228,6 +245,8 @@ class Engine:
         self.obs_high = self.observer.high.astype(np.float32)
         self.state_observer = Observer(self, tuple(state_blocks), 0.0, "state_blocks") if state_blocks else None
         self._build_state_bounds()
+        self._compiled: tuple[Array, Any, Any] | None = None
+        self._consts: Consts | None = None
 
     # ------------------------------------------------------------------ construction
     def _weights(self, overrides: dict[str, float] | None) -> dict[str, float]:
@@ -288,8 +307,11 @@ class Engine:
         B = start.shape[0]
         static = [ob.capsules(params[ob.key], np.zeros(B), self.bounds) for ob in self.obstacles if not ob.moves()]
         caps = Capsules.join(static, B, self.d)
-        params["_ca"], params["_ce"], params["_cr"] = caps
-        params["_pvec"] = np.asarray(self.scenario.param_vector(params), dtype=np.float64)
+        params["_ca"], params["_ce"], params["_cr"] = (np.ascontiguousarray(f) for f in caps)
+        params["_pvec"] = np.ascontiguousarray(self.scenario.param_vector(params), dtype=np.float64)
+        params["_goal_p"] = np.ascontiguousarray(self.scenario.goal_vector(params), dtype=np.float64)
+        moving = self._moving[0].key if self._moving else None
+        params["_mov_p"] = np.ascontiguousarray(params[moving]) if moving else np.zeros((B, 0, 2 * self.d + 1))
         for arr in params.values():
             arr.setflags(write=False)
         k = np.zeros(B, dtype=np.int64)
@@ -303,7 +325,7 @@ class Engine:
             k=k,
             goal=goal,
             goal_vel=goal_vel,
-            goal_dist=gd[:, self.leaders],
+            goal_dist=np.ascontiguousarray(gd[:, self.leaders]),
             err=self._fit(start)[2],
             streak=np.zeros(B, dtype=np.int64),
             params=params,
@@ -334,66 +356,72 @@ class Engine:
 
     def _fit(self, pos: Array) -> tuple[Array, Array, Array]:
         """Least-squares affine fit of positions (B, n, d): Theta (B, d, d), b (B, d), RMS residual (B,) m."""
-        coef = np.matmul(self.affine._pinv, pos)  # (B, d + 1, d): rows of Theta^T, then b
-        res = pos - np.matmul(self._H, coef)
-        err = np.sqrt(np.einsum("bnd,bnd->b", res, res) * (1.0 / self.n))
-        return np.swapaxes(coef[:, :-1], 1, 2), coef[:, -1], err
+        return fit_rows(self.fw.positions, self._pinv, np.ascontiguousarray(pos))
 
-    def _update(self, state: EngineState, u: Array) -> tuple[Array, Array | None]:
-        """The law and the dynamics: next states x' (B, n, q) and law memory, from inputs u = u_max a."""
-        B = u.shape[0]
-        if self._M is None:  # sparse stress: the core law itself
-            x1, mem1 = self.law.step(state.x, u, state.memory)
-            return x1, mem1
-        parts = [state.x.reshape(B, -1), u.reshape(B, -1)]
-        if state.memory is not None:
-            parts.append(state.memory.reshape(B, -1))
-        z = np.concatenate(parts, axis=1) @ self._M
-        nq = self.n * self.q
-        mem1 = z[:, nq:].reshape(B, self.n_f, self.p) if state.memory is not None else None
-        return z[:, :nq].reshape(B, self.n, self.q), mem1
+    def __getstate__(self) -> dict[str, Any]:
+        """Everything but the compiled step (a module), which the copy composes again on its first step."""
+        return {**self.__dict__, "_compiled": None, "_consts": None}
 
-    def _contacts(
-        self, prev: EngineState, pos: Array, params: dict[str, Array], caps: Capsules
-    ) -> tuple[Array, NDArray[np.bool_], NDArray[np.bool_]]:
-        """Clearance (B,) m, collision and out-of-bounds (B,) bool of the new positions ``pos`` (B, n, d)."""
-        B = pos.shape[0]
-        clear = np.full(B, np.inf)
-        if self.pair_i.size:
-            clear = pair_clearance(pos, self.pair_i, self.pair_j) - 2.0 * self.agent_radius
-        if caps.a.shape[1]:
-            np.minimum(clear, clearance(pos, caps) - self.agent_radius, out=clear)
-            caps0 = self.capsules(params, prev.k) if self._moving else caps
-            moved = np.abs(pos - prev.pos).max(axis=(1, 2))
-            if self._moving:
-                moved += np.abs(caps.a - caps0.a).max(axis=(1, 2))
-            fast = np.flatnonzero(moved > self._fast)
-            if fast.size:  # swept contacts: the motion relative to each obstacle over the step
-                sub = lambda c: Capsules(*(f[fast] for f in c))  # noqa: E731
-                swept = path_clearance(prev.pos[fast], pos[fast], sub(caps0), sub(caps))
-                clear[fast] = np.minimum(clear[fast], swept - self.agent_radius)
-        lo, hi = self.bounds
-        oob = ((pos < lo) | (pos > hi)).any(axis=(1, 2))
-        return clear, (clear < 0.0) | oob, oob
+    # ------------------------------------------------------------------ the compiled step
+    def _kernel(self) -> tuple[Consts, Any]:
+        """The constants of the compiled step and its module (composed once per engine; the constants again
+        when ``max_cycles`` changed)."""
+        if self._compiled is None:
+            from .rewards import ROUTE_TERMS
 
-    def context(
-        self, state: EngineState, rng: np.random.Generator | Sequence[np.random.Generator] | None = None
-    ) -> StepContext:
-        """The context of a state with no step behind it (a reset): no actions, no contacts judged."""
-        B = state.batch_size
-        theta, b, _ = self._fit(state.pos)
-        false = np.zeros(B, dtype=bool)
-        caps = self.capsules(state.params, state.k)
-        clear = np.full(B, np.inf)
-        acts = np.zeros((B, self.n_l, self.p))
-        return StepContext(self, state, None, acts, theta, b, clear, false, false, false, false, caps, rng)
+            blocks = [(blk.row if blk.name != "task" else self.scenario.task_row, self.obs_blocks[blk.name].start)
+                      for blk in self.observer.blocks]  # fmt: skip
+            terms = [name for name, w in self.reward_weights.items() if w != 0.0]
+            route = self.scenario.route_row if any(t in ROUTE_TERMS for t in terms) else None
+            moving = self._moving[0].row if self._moving else None
+            mod = compose(blocks, [TERMS[t].row for t in terms], route, moving, self.scenario.pose_row)
+            state_blocks = [] if self.state_observer is None else self.state_observer.blocks
+            smod = compose([(blk.row if blk.name != "task" else self.scenario.task_row,
+                             self.state_observer.slices[blk.name].start) for blk in state_blocks], [], None, moving,
+                           self.scenario.pose_row) if self.state_observer is not None else None  # fmt: skip
+            self._compiled = (np.array([self.reward_weights[t] for t in terms]), mod, smod)
+        weights, mod, _ = self._compiled
+        if self._consts is None or self._consts.max_cycles != self.max_cycles:
+            d = self.d
+            self._consts = Consts(
+                leaders=self.leaders, others=self.other_leaders, pair_i=self.pair_i, pair_j=self.pair_j,
+                r=self.fw.positions, pinv=self._pinv, law=self._M if self._M is not None else np.zeros((0, 0)),
+                c_t=self._C_T, ca_t=self._CA_T if self._CA_T is not None else np.zeros((0, d)), bounds=self.bounds,
+                ray_dirs=self.ray_dirs, obs_low=self.observer.low, obs_high=self.observer.high,
+                noise_mask=self.observer.noise_mask, weights=weights, dt=self.dt, u_max=self.u_max,
+                radius=self.agent_radius, fast=self._fast, goal_tol=self.scenario.goal_tol,
+                formation_tol=self.scenario.formation_tol, v_bound=self.v_bound, obstacle_range=self.obstacle_range,
+                sense_radius=self.sense_radius, max_cycles=self.max_cycles, hold_steps=self.scenario.hold_steps,
+                n_nearest=self.n_nearest, k_nearest=self.k_nearest,
+                end_on_success=self.scenario.terminate_on_success,
+            )  # fmt: skip
+        return self._consts, mod
+
+    def _noise(self, B: int, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> Array:
+        """Observation noise (B, n_l, obs_dim) drawn from ``rng`` (or one generator per env), or none."""
+        if self.observer.noise <= 0.0 or rng is None:
+            return _NO_NOISE
+        shape = (self.n_l, self.obs_dim)
+        if isinstance(rng, np.random.Generator):
+            return rng.normal(0.0, self.observer.noise, (B, *shape))
+        return np.stack([g.normal(0.0, self.observer.noise, shape) for g in rng])  # env b draws as alone
+
+    def _args(self, c: Consts, state: EngineState, a: Array, x1: Array, mem1: Array, noise: Array) -> tuple[Any, ...]:
+        p = state.params
+        ep = Episode(p["_pvec"], p["_ca"], p["_ce"], p["_cr"], p["_mov_p"], p["_goal_p"])
+        mem = state.memory if state.memory is not None else np.zeros((state.x.shape[0], 0, 0))
+        return (c, ep, state.x, mem, state.pos, state.vel, state.goal, state.goal_vel, state.k, state.goal_dist,
+                state.streak, a, x1, mem1, noise)  # fmt: skip
 
     # ------------------------------------------------------------------ the API
     def observe(
         self, state: EngineState, rng: np.random.Generator | Sequence[np.random.Generator] | None = None
     ) -> NDArray[np.float32]:
         """Observations of every leader, shape (B, n_l, obs_dim), float32 (layout: ``obs_blocks``)."""
-        return self.observer(self.context(state, rng))
+        c, mod = self._kernel()
+        B = state.batch_size
+        acts = np.zeros((B, self.n_l, self.p))
+        return mod.observe(*self._args(c, state, acts, _NO_STATE, _NO_STATE, self._noise(B, rng)))[0]
 
     def check_actions(self, actions: ArrayLike, B: int) -> Array:
         """Actions as float64 (B, n_l, p); raise ValueError naming the leader on NaN or inf."""
@@ -414,9 +442,9 @@ class Engine:
         actions: ArrayLike,
         rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
     ) -> tuple[EngineState, NDArray[np.float32], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
-        """One sample of every environment: :meth:`advance`, then every leader's observation of the new state."""
+        """One sample of every environment: :meth:`advance`, and every leader's observation of the new state."""
         new, ctx, rew, terminated, truncated, info = self.advance(state, actions, rng)
-        return new, self.observer(ctx), rew, terminated, truncated, info
+        return new, ctx.obs, rew, terminated, truncated, info
 
     def advance(
         self,
@@ -424,8 +452,7 @@ class Engine:
         actions: ArrayLike,
         rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
     ) -> tuple[EngineState, StepContext, Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
-        """One sample of every environment, without the leaders' observations (what a commander, which reads the
-        global state, needs); :meth:`step` adds them from the returned context.
+        """One sample of every environment (the compiled step of :mod:`~formation_env.env.kernel`).
 
         Args:
             state: the current state (not modified).
@@ -433,46 +460,39 @@ class Engine:
                 ValueError (and nothing changes).
             rng: the generator of observation noise (needed only with ``obs_noise`` > 0), or one per env.
         Returns:
-            (state', the step's :class:`StepContext`, rewards (B, n_l), terminated (B,), truncated (B,), info)
-            with the arrays (B,) of ``INFO_KEYS`` (control_effort (B, n_l): |u_i|^2); :meth:`step` returns
-            the observations (B, n_l, obs_dim) float32 in the context's place.
+            (state', the step's :class:`StepContext` (observations and affine fit), rewards (B, n_l),
+            terminated (B,), truncated (B,), info) with the arrays (B,) of ``INFO_KEYS`` (control_effort
+            (B, n_l): |u_i|^2); :meth:`step` returns the observations (B, n_l, obs_dim) float32 in the
+            context's place.
         """
         if not isinstance(state, EngineState):
             raise TypeError(f"state must be an EngineState (from reset), got {type(state).__name__}")
         B = state.batch_size
-        a = np.clip(self.check_actions(actions, B), -1.0, 1.0)
-        u = self.u_max * a
-        x1, mem1 = self._update(state, u)
-        pos = x1 @ self._C_T
-        vel = x1 @ self._CA_T if self._CA_T is not None else (pos - state.pos) * (1.0 / self.dt)
-        k = state.k + 1
-        params = state.params
-        caps = self.capsules(params, k)
-        clear, collision, oob = self._contacts(state, pos, params, caps)
-        goal, goal_vel = self._goal(params, k) if self.scenario.moving_goal else (state.goal, state.goal_vel)
-        delta = goal - pos
-        gd = np.sqrt(np.einsum("bnd,bnd->bn", delta, delta))
-        theta, b, err = self._fit(pos)
-        sc = self.scenario
-        gd_max = gd.max(axis=1)
-        ok = sc.is_success(gd_max, err) & ~collision
-        streak = (state.streak + 1) * ok
-        success = streak >= sc.hold_steps
-        terminated = collision | success if sc.terminate_on_success else collision
-        truncated = (k >= self.max_cycles) & ~terminated
-        new = EngineState(x1, pos, vel, mem1, k, goal, goal_vel, gd[:, self.leaders], err, streak, params)
-        ctx = StepContext(self, new, state, a, theta, b, clear, collision, oob, ok, success, caps, rng)
+        a = np.array(self.check_actions(actions, B), dtype=np.float64)
+        c, mod = self._kernel()
+        x1: Array = _NO_STATE
+        mem1: Array = _NO_STATE
+        if self._M is None:  # sparse stress: the core law itself, then the compiled rest of the step
+            x1, law_mem = self.law.step(state.x, self.u_max * np.clip(a, -1.0, 1.0), state.memory)
+            mem1 = _NO_STATE if law_mem is None else law_mem
+        args = self._args(c, state, a, x1, mem1, self._noise(B, rng))
+        raw, obs, rew = (mod.step_parallel if B >= PARALLEL_FROM else mod.step)(*args)
+        out = Outputs._make(raw)
+        f = out.flags
+        mem = out.mem if state.memory is not None else None
+        new = EngineState(out.x, out.pos, out.vel, mem, out.k, out.goal, out.gvel, out.gdist, out.err, out.streak,
+                          state.params)  # fmt: skip
         info = {
-            "success": success,
-            "collision": collision,
-            "out_of_bounds": oob,
-            "formation_error": err,
-            "min_clearance": clear,
-            "goal_distance": gd_max,
-            "time": k * self.dt,
-            "control_effort": np.einsum("blp,blp->bl", u, u),
+            "success": f[:, FLAG_SUCCESS],
+            "collision": f[:, FLAG_COLLISION],
+            "out_of_bounds": f[:, FLAG_OOB],
+            "formation_error": out.err,
+            "min_clearance": out.clear,
+            "goal_distance": out.gmax,
+            "time": out.k * self.dt,
+            "control_effort": out.effort,
         }
-        return new, ctx, total_reward(ctx, self.reward_weights), terminated, truncated, info
+        return new, StepContext(obs, out.theta), rew, f[:, FLAG_TERMINATED], f[:, FLAG_TRUNCATED], info
 
     def global_state(self, state: EngineState, ctx: StepContext | None = None) -> NDArray[np.float32]:
         """Global state vectors, shape (B, state_dim), float32: positions, velocities, goal positions and
@@ -481,16 +501,23 @@ class Engine:
         ``ctx``: the context of the step that made ``state`` (from :meth:`advance`), if at hand: its affine fit
         is reused."""
         B = state.batch_size
-        if ctx is None and self.state_observer is not None:
-            ctx = self.context(state)
-        theta = self._fit(state.pos)[0] if ctx is None else ctx.theta
+        blocks = None
+        if self.state_observer is not None:
+            c, _ = self._kernel()
+            acts = np.zeros((B, self.n_l, self.p))
+            so = self.state_observer
+            c = c._replace(obs_low=so.low, obs_high=so.high, noise_mask=so.noise_mask)
+            assert self._compiled is not None
+            blocks, theta = self._compiled[2].observe(*self._args(c, state, acts, _NO_STATE, _NO_STATE, _NO_NOISE))
+        else:
+            theta = self._fit(state.pos)[0] if ctx is None else ctx.theta
         t = self.dt * state.k.astype(np.float64)
         parts = [state.pos.reshape(B, -1), state.vel.reshape(B, -1), state.goal.reshape(B, -1)]
         parts += [state.goal_vel.reshape(B, -1), state.err[:, None], theta.reshape(B, -1), state.params["_pvec"]]
         parts += [ob.state_vector(state.params[ob.key], t, self.bounds) for ob in self.obstacles]
         parts.append(state.k[:, None].astype(np.float64) * (1.0 / self.max_cycles))
-        if self.state_observer is not None and ctx is not None:
-            parts.append(self.state_observer(ctx).reshape(B, -1).astype(np.float64))
+        if blocks is not None:
+            parts.append(blocks.reshape(B, -1).astype(np.float64))
         out = np.concatenate(parts, axis=1)
         np.clip(out, self._state_lo64, self._state_hi64, out=out)
         return out.astype(np.float32)

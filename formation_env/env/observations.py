@@ -3,23 +3,25 @@
 A leader's observation is its blocks side by side (``Engine(observation=[...])`` picks and orders them;
 :data:`DEFAULT_OBSERVATION` is ``formation_v0``'s). Every entry is clipped to its block's finite bounds,
 and Gaussian noise of ``obs_noise`` (in each entry's own units) is added first to the blocks that are
-measurements (``noisy``). A new block is one :func:`register_block` call; the env's docstring table is
-:func:`observation_table` of the registry (``FormationEnv`` lists its symbols), so it cannot drift from the code.
+measurements (``noisy``). A block's ``row(b, out, lo, ...)`` is a compiled function that writes env b's
+entries of every leader i into ``out[i, lo:lo + size]``; its other parameters are named after the step's
+arrays it reads (:func:`formation_env.env.kernel.call`: ``pos``, ``leaders``, ``theta``, ...). A new block is
+one :func:`register_block` call; the env's docstring table is :func:`observation_table` of the registry
+(``FormationEnv`` lists its symbols), so it cannot drift from the code.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from .obstacles import nearest_vectors, ray_ranges
-
-if TYPE_CHECKING:
-    from .state import StepContext
+from ._numba import jit
+from .obstacles import ray_range
 
 #: The engine a block reads its sizes and bounds from (``formation_env.env.engine.Engine``; typed loosely so that
 #: this module needs nothing of the engine's).
@@ -28,6 +30,7 @@ Engine = Any
 __all__ = ["DEFAULT_OBSERVATION", "OBS_BLOCKS", "ObsBlock", "observation_table", "register_block"]
 
 Array = NDArray[np.float64]
+Ints = NDArray[np.int64]
 Bounds = tuple[Array, Array]
 
 
@@ -39,7 +42,7 @@ class ObsBlock:
         name: registry key (and the key of ``Engine.obs_blocks``).
         size: entries per leader, a symbol of the table (``size_text``) and a function of the engine.
         bounds: (low, high) of its entries (size,) given the engine; finite.
-        fn: the block of every leader from a step's context, shape (B, n_l, size).
+        row: the compiled ``row(b, out, lo, ...)`` (the module docstring); None: the scenario's ``task_row``.
         meaning: one line for the observation table, with units.
         noisy: observation noise applies (a measurement; not the clock or the agent's id).
     """
@@ -48,7 +51,7 @@ class ObsBlock:
     size_text: str
     size: Callable[[Engine], int]
     bounds: Callable[[Engine], Bounds]
-    fn: Callable[[StepContext], Array]
+    row: Any
     meaning: str
     bounds_text: str
     noisy: bool = True
@@ -94,74 +97,183 @@ def _extent(eng: Engine) -> Array:
     return np.asarray(eng.bounds[1] - eng.bounds[0], dtype=np.float64)
 
 
-def _leaders(ctx: StepContext, a: Array) -> Array:
-    return a[:, ctx.engine.leaders]
+# ---------------------------------------------------------------------------- the blocks' rows
+@jit
+def position(b: int, out: Array, lo: int, leaders: Ints, pos: Array) -> None:  # pragma: no cover
+    for i, a in enumerate(leaders):
+        for k in range(pos.shape[2]):
+            out[i, lo + k] = pos[b, a, k]
+
+
+@jit
+def velocity(b: int, out: Array, lo: int, leaders: Ints, vel: Array) -> None:  # pragma: no cover
+    for i, a in enumerate(leaders):
+        for k in range(vel.shape[2]):
+            out[i, lo + k] = vel[b, a, k]
+
+
+@jit
+def other_leaders(b: int, out: Array, lo: int, leaders: Ints, others: Ints, pos: Array) -> None:  # pragma: no cover
+    d = pos.shape[2]
+    for i in range(leaders.shape[0]):
+        for j in range(others.shape[1]):
+            for k in range(d):
+                out[i, lo + j * d + k] = pos[b, leaders[others[i, j]], k] - pos[b, leaders[i], k]
+
+
+@jit
+def goal(b: int, out: Array, lo: int, leaders: Ints, pos: Array, goal: Array) -> None:  # pragma: no cover
+    for i, a in enumerate(leaders):
+        for k in range(pos.shape[2]):
+            out[i, lo + k] = goal[b, a, k] - pos[b, a, k]
+
+
+@jit
+def goal_velocity(b: int, out: Array, lo: int, leaders: Ints, gvel: Array) -> None:  # pragma: no cover
+    for i, a in enumerate(leaders):
+        for k in range(gvel.shape[2]):
+            out[i, lo + k] = gvel[b, a, k]
+
+
+@jit
+def theta(b: int, out: Array, lo: int, theta: Array) -> None:  # pragma: no cover
+    d = theta.shape[1]
+    for i in range(out.shape[0]):
+        for r in range(d):
+            for k in range(d):
+                out[i, lo + r * d + k] = theta[b, r, k]
+
+
+@jit
+def time(b: int, out: Array, lo: int, k: Ints, max_cycles: int) -> None:  # pragma: no cover
+    for i in range(out.shape[0]):
+        out[i, lo] = k[b] / max_cycles
+
+
+@jit
+def formation_error(b: int, out: Array, lo: int, err: Array) -> None:  # pragma: no cover
+    for i in range(out.shape[0]):
+        out[i, lo] = err[b]
+
+
+@jit
+def obstacles(  # pragma: no cover
+    b: int, out: Array, lo: int, leaders: Ints, pos: Array, cur_a: Array, cur_e: Array, cur_r: Array,
+    obstacle_range: float, ray_dirs: Array, n_nearest: int
+) -> None:  # fmt: skip
+    a, e, rad, rng = cur_a[b], cur_e[b], cur_r[b], obstacle_range
+    d = pos.shape[2]
+    for i, ag in enumerate(leaders):
+        ox = pos[b, ag, 0]
+        oy = pos[b, ag, 1]
+        if d == 2:
+            for q in range(ray_dirs.shape[0]):
+                out[i, lo + q] = ray_range(ox, oy, ray_dirs[q, 0], ray_dirs[q, 1], a, e, rad, rng) / rng
+            continue
+        m = rad.shape[0]
+        surf = np.empty(m)
+        toward = np.empty((m, d))
+        for j in range(m):
+            ee = 0.0
+            for k in range(d):
+                ee += e[j, k] * e[j, k]
+            t = 0.0
+            if ee > 0.0:
+                for k in range(d):
+                    t += (pos[b, ag, k] - a[j, k]) * e[j, k]
+                t = min(max(t / ee, 0.0), 1.0)
+            dd = 0.0
+            for k in range(d):
+                toward[j, k] = a[j, k] + t * e[j, k] - pos[b, ag, k]
+                dd += toward[j, k] ** 2
+            surf[j] = math.sqrt(dd) - rad[j]
+        order = np.argsort(surf, kind="mergesort")
+        for q in range(n_nearest):
+            for k in range(d):
+                out[i, lo + q * d + k] = 0.0
+            if q < m:
+                j = order[q]
+                norm = max(math.sqrt(np.sum(toward[j] ** 2)), 1e-12)
+                mag = min(max(1.0 - surf[j] / rng, 0.0), 1.0)
+                for k in range(d):
+                    out[i, lo + q * d + k] = toward[j, k] / norm * mag
+
+
+@jit
+def nearest_agents(  # pragma: no cover
+    b: int, out: Array, lo: int, leaders: Ints, pos: Array, k_nearest: int, sense_radius: float
+) -> None:
+    n, d = pos.shape[1], pos.shape[2]
+    w = d + 1
+    for i, me in enumerate(leaders):
+        dist = np.empty(n)
+        for j in range(n):
+            dd = 0.0
+            for k in range(d):
+                dd += (pos[b, j, k] - pos[b, me, k]) ** 2
+            dist[j] = math.sqrt(dd) if j != me else np.inf
+        order = np.argsort(dist, kind="mergesort")
+        for q in range(k_nearest):
+            for k in range(w):
+                out[i, lo + q * w + k] = 0.0
+            if q < n - 1 and dist[order[q]] <= sense_radius:
+                for k in range(d):
+                    out[i, lo + q * w + k] = pos[b, order[q], k] - pos[b, me, k]
+                out[i, lo + q * w + d] = 1.0
+
+
+@jit
+def agent_id(b: int, out: Array, lo: int) -> None:  # pragma: no cover
+    n_l = out.shape[0]
+    for i in range(n_l):
+        for j in range(n_l):
+            out[i, lo + j] = 1.0 if i == j else 0.0
 
 
 # ---------------------------------------------------------------------------- the blocks
 register_block(
     ObsBlock(
-        "position", "d", lambda e: e.d, lambda e: (e.bounds[0], e.bounds[1]),
-        lambda c: _leaders(c, c.state.pos), "own position p_i (m)", "W",
+        "position", "d", lambda e: e.d, lambda e: (e.bounds[0], e.bounds[1]), position, "own position p_i (m)", "W"
     )
 )  # fmt: skip
 register_block(
     ObsBlock(
-        "velocity", "d", lambda e: e.d, lambda e: _fill(e.d, -e.v_bound, e.v_bound),
-        lambda c: _leaders(c, c.state.vel), "own velocity (m/s)", "+-v",
+        "velocity", "d", lambda e: e.d, lambda e: _fill(e.d, -e.v_bound, e.v_bound), velocity,
+        "own velocity (m/s)", "+-v",
     )
 )  # fmt: skip
-
-
-def _other_leaders(ctx: StepContext) -> Array:
-    eng = ctx.engine
-    pl = ctx.state.pos[:, eng.leaders]  # (B, n_l, d)
-    rel = pl[:, eng.other_leaders] - pl[:, :, None, :]  # (B, n_l, n_l - 1, d)
-    return rel.reshape(rel.shape[0], eng.n_l, -1)
-
-
 register_block(
     ObsBlock(
         "other_leaders", "(n_l - 1) d", lambda e: (e.n_l - 1) * e.d,
         lambda e: (np.tile(-_extent(e), e.n_l - 1), np.tile(_extent(e), e.n_l - 1)),
-        _other_leaders, "p_j - p_i for the other leaders, in leader order (m)", "+-E",
+        other_leaders, "p_j - p_i for the other leaders, in leader order (m)", "+-E",
     )
 )  # fmt: skip
 register_block(
     ObsBlock(
-        "goal", "d", lambda e: e.d, lambda e: (-_extent(e), _extent(e)),
-        lambda c: _leaders(c, c.state.goal - c.state.pos), "own goal (reference) position minus p_i (m)", "+-E",
+        "goal", "d", lambda e: e.d, lambda e: (-_extent(e), _extent(e)), goal,
+        "own goal (reference) position minus p_i (m)", "+-E",
     )
 )  # fmt: skip
 register_block(
     ObsBlock(
-        "goal_velocity", "d", lambda e: e.d, lambda e: _fill(e.d, -e.v_bound, e.v_bound),
-        lambda c: _leaders(c, c.state.goal_vel), "velocity of the own goal position (m/s; 0 if static)", "+-v",
-    )
-)  # fmt: skip
-
-
-def _per_leader(ctx: StepContext, a: Array) -> Array:
-    """A per-env array (B, k) repeated for every leader, (B, n_l, k)."""
-    return np.repeat(a.reshape(a.shape[0], 1, -1), ctx.engine.n_l, axis=1)
-
-
-register_block(
-    ObsBlock(
-        "theta", "d^2", lambda e: e.d * e.d, lambda e: _fill(e.d * e.d, -e.theta_clip, e.theta_clip),
-        lambda c: _per_leader(c, c.theta), "Theta of the least-squares affine fit of all agents, row-major", "+-3",
+        "goal_velocity", "d", lambda e: e.d, lambda e: _fill(e.d, -e.v_bound, e.v_bound), goal_velocity,
+        "velocity of the own goal position (m/s; 0 if static)", "+-v",
     )
 )  # fmt: skip
 register_block(
     ObsBlock(
-        "time", "1", lambda e: 1, lambda e: _fill(1, 0.0, 1.0),
-        lambda c: _per_leader(c, c.state.k * (1.0 / c.engine.max_cycles)), "k / max_cycles", "[0, 1]", noisy=False,
+        "theta", "d^2", lambda e: e.d * e.d, lambda e: _fill(e.d * e.d, -e.theta_clip, e.theta_clip), theta,
+        "Theta of the least-squares affine fit of all agents, row-major", "+-3",
     )
+)  # fmt: skip
+register_block(
+    ObsBlock("time", "1", lambda e: 1, lambda e: _fill(1, 0.0, 1.0), time, "k / max_cycles", "[0, 1]", noisy=False)
 )  # fmt: skip
 register_block(
     ObsBlock(
         "formation_error", "1", lambda e: 1, lambda e: _fill(1, 0.0, float(np.linalg.norm(_extent(e)))),
-        lambda c: _per_leader(c, c.state.err), "RMS distance of all agents from their affine fit (m)", "[0, \\|E\\|]",
+        formation_error, "RMS distance of all agents from their affine fit (m)", "[0, \\|E\\|]",
     )
 )  # fmt: skip
 
@@ -170,43 +282,14 @@ def _obstacle_size(eng: Engine) -> int:
     return eng.n_rays if eng.d == 2 else eng.n_nearest * eng.d
 
 
-def _obstacles(ctx: StepContext) -> Array:
-    eng = ctx.engine
-    o = ctx.state.pos[:, eng.leaders]
-    rng_ = eng.obstacle_range
-    if eng.d == 2:
-        return ray_ranges(o, eng.ray_dirs, ctx.capsules, rng_) * (1.0 / rng_)
-    return nearest_vectors(o, ctx.capsules, eng.n_nearest, rng_).reshape(o.shape[0], eng.n_l, -1)
-
-
 register_block(
     ObsBlock(
         "obstacles", "2D: R; 3D: N d", _obstacle_size,
-        lambda e: _fill(_obstacle_size(e), 0.0 if e.d == 2 else -1.0, 1.0), _obstacles,
+        lambda e: _fill(_obstacle_size(e), 0.0 if e.d == 2 else -1.0, 1.0), obstacles,
         "2D: range to the first obstacle along world rays at angles 2 pi j / R, divided by the sensing range; "
         "3D: per nearest obstacle, unit direction times (1 - surface distance / range)^+", "[0, 1]; 3D [-1, 1]",
     )
 )  # fmt: skip
-
-
-def _nearest_agents(ctx: StepContext) -> Array:
-    """The k nearest other agents (followers included) of each leader within the sensing radius: relative
-    position (d) and a visibility flag (1) each, nearest first; unseen slots are zero."""
-    eng = ctx.engine
-    pos = ctx.state.pos
-    B, n, d = pos.shape
-    k = eng.k_nearest
-    rel = pos[:, None, :, :] - pos[:, eng.leaders, None, :]  # (B, n_l, n, d)
-    dist = np.sqrt(np.einsum("blnd,blnd->bln", rel, rel))
-    dist[:, np.arange(eng.n_l), eng.leaders] = np.inf  # not oneself
-    kk = min(k, n - 1)
-    idx = np.argsort(dist, axis=-1, kind="stable")[..., :kk]
-    near = np.take_along_axis(rel, idx[..., None], axis=2)
-    seen = np.take_along_axis(dist, idx, axis=2) <= eng.sense_radius
-    out = np.zeros((B, eng.n_l, k, d + 1))
-    out[:, :, :kk, :d] = near * seen[..., None]
-    out[:, :, :kk, d] = seen
-    return out.reshape(B, eng.n_l, -1)
 
 
 def _nearest_bounds(eng: Engine) -> Bounds:
@@ -217,25 +300,22 @@ def _nearest_bounds(eng: Engine) -> Bounds:
 
 register_block(
     ObsBlock(
-        "nearest_agents", "k (d + 1)", lambda e: e.k_nearest * (e.d + 1), _nearest_bounds, _nearest_agents,
+        "nearest_agents", "k (d + 1)", lambda e: e.k_nearest * (e.d + 1), _nearest_bounds, nearest_agents,
         "the k nearest other agents (followers too) within ``sense_radius``, nearest first: p_j - p_i (m) and "
         "1 if seen (an unseen slot is all 0)", "+-E, [0, 1]",
     )
 )  # fmt: skip
 register_block(
     ObsBlock(
-        "agent_id", "n_l", lambda e: e.n_l, lambda e: _fill(e.n_l, 0.0, 1.0),
-        lambda c: np.broadcast_to(np.eye(c.engine.n_l), (c.state.pos.shape[0], c.engine.n_l, c.engine.n_l)),
+        "agent_id", "n_l", lambda e: e.n_l, lambda e: _fill(e.n_l, 0.0, 1.0), agent_id,
         "one-hot of the leader's index", "{0, 1}", noisy=False,
     )
 )  # fmt: skip
-
-
 register_block(
     ObsBlock(
         "task", "scenario's", lambda e: len(e.scenario.task_feature_bounds()[0]),
-        lambda e: e.scenario.task_feature_bounds(), lambda c: c.engine.scenario.task_features(c),
-        "what the scenario says the task needs, relative to the formation (``Scenario.task_features``; e.g. "
+        lambda e: e.scenario.task_feature_bounds(), None,
+        "what the scenario says the task needs, relative to the formation (``Scenario.task_row``; e.g. "
         "the gap's position and the room left in it)", "scenario's",
     )
 )  # fmt: skip
@@ -273,15 +353,3 @@ class Observer:
 
     def __setstate__(self, d: dict[str, Any]) -> None:
         self.__dict__.update(d, blocks=[OBS_BLOCKS[nm] for nm in d["blocks"]])
-
-    def __call__(self, ctx: StepContext) -> NDArray[np.float32]:
-        """Every leader's observation, (B, n_l, obs_dim) float32, clipped to the bounds."""
-        obs = np.concatenate([blk.fn(ctx) for blk in self.blocks], axis=-1, dtype=np.float64)
-        if self.noise > 0.0 and ctx.rng is not None:
-            if isinstance(ctx.rng, np.random.Generator):
-                noise = ctx.rng.normal(0.0, self.noise, obs.shape)
-            else:  # one generator per environment (the vectorised env): env b draws as the single env would
-                noise = np.stack([g.normal(0.0, self.noise, obs.shape[1:]) for g in ctx.rng])
-            obs = obs + noise * self.noise_mask
-        np.clip(obs, self.low, self.high, out=obs)
-        return obs.astype(np.float32)

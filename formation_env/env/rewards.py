@@ -1,36 +1,40 @@
 """Rewards as registered terms: name, default weight, and a function of one step's context.
 
-Leader i's reward is sum_t w_t term_t(ctx)_i over the registered terms (:data:`REWARD_TERMS`), with the
+Leader i's reward is sum_t w_t term_t_i over the registered terms (:data:`REWARD_TERMS`), with the
 weights of :data:`DEFAULT_WEIGHTS`, then the scenario's (``Scenario.weights``), then the caller's
-(``reward_weights=``). A term returns (B, n_l) (per leader) or (B,) (shared by the team); its sign is in
-the term, so weights are magnitudes. A term of weight 0 is not computed. A new term is one
-:func:`reward_term` decoration.
+(``reward_weights=``). A term is a compiled ``row(b, out, w, ...)`` that adds w times env b's value of every
+leader to ``out`` (n_l,) (a team term adds the same to all); its other parameters are named after the step's
+arrays it reads (:func:`formation_env.env.kernel.call`). Its sign is in the term, so weights are magnitudes. A term of
+weight 0 is not computed. A new term is one :func:`reward_term` decoration.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-if TYPE_CHECKING:
-    from .state import EngineState, StepContext
-
-__all__ = ["DEFAULT_WEIGHTS", "REWARD_TERMS", "TERMS", "RewardTerm", "reward_table", "reward_term", "total_reward"]
+from ._numba import jit
+from .kernel import FLAG_AT_GOAL, FLAG_COLLISION, FLAG_SUCCESS
 
 Array = NDArray[np.float64]
+Bools = NDArray[np.bool_]
+
+__all__ = ["DEFAULT_WEIGHTS", "REWARD_TERMS", "ROUTE_TERMS", "TERMS", "RewardTerm", "reward_table", "reward_term"]
 
 
 @dataclass(frozen=True)
 class RewardTerm:
-    """A reward term: ``fn(ctx)`` (B, n_l) or (B,), its default weight, one line of meaning (with the sign)."""
+    """A reward term: its compiled ``row`` (the module docstring), default weight, one line of meaning (with the
+    sign)."""
 
     name: str
     weight: float
-    fn: Callable[[StepContext], Array]
+    row: Any
     meaning: str
 
 
@@ -38,40 +42,35 @@ class RewardTerm:
 TERMS: dict[str, RewardTerm] = {}
 
 
-def reward_term(name: str, weight: float, meaning: str) -> Callable[[Callable[[StepContext], Array]], RewardTerm]:
-    """Register the decorated function as reward term ``name`` with default ``weight``."""
+def reward_term(name: str, weight: float, meaning: str) -> Callable[[Callable[..., None]], Any]:
+    """Register the decorated row function as reward term ``name`` with default ``weight``; the function
+    becomes its compiled row."""
 
-    def add(fn: Callable[[StepContext], Array]) -> RewardTerm:
+    def add(fn: Callable[..., None]) -> Any:
         if name in TERMS:
             raise ValueError(f"reward term {name!r} is registered already")
-        TERMS[name] = term = RewardTerm(name, float(weight), fn, meaning)
-        return term
+        row = jit(fn)
+        TERMS[name] = RewardTerm(name, float(weight), row, meaning)
+        return row
 
     return add
 
 
 @reward_term("progress", 1.0, "g_i(k) - g_i(k+1): the leader's approach to its goal position (m)")
-def _progress(ctx: StepContext) -> Array:
-    assert ctx.prev is not None
-    return ctx.prev.goal_dist - ctx.state.goal_dist
+def _progress(b: int, out: Array, w: float, gdist0: Array, gdist: Array) -> None:  # pragma: no cover
+    for i in range(out.shape[0]):
+        out[i] += w * (gdist0[b, i] - gdist[b, i])
 
 
 @reward_term("distance", 0.0, "-T g_i(k+1): the leader's distance to its goal, per second (m s)")
-def _distance(ctx: StepContext) -> Array:
-    return -ctx.engine.dt * ctx.state.goal_dist
+def _distance(b: int, out: Array, w: float, dt: float, gdist: Array) -> None:  # pragma: no cover
+    for i in range(out.shape[0]):
+        out[i] -= w * dt * gdist[b, i]
 
 
 #: Scales of the ``approach`` term: velocity errors weigh as position errors TAU_APPROACH s long, and the
 #: log's floor EPS_APPROACH (m) is the distance below which further approach earns little more.
 TAU_APPROACH, EPS_APPROACH = 1.0, 0.02
-
-
-def phase_distance(state: EngineState, engine: Any) -> Array:
-    """Every agent's distance to its goal state in phase space, sqrt(g^2 + TAU^2 |v - v*|^2), (B, n), m: g the
-    length of the scenario's route to the goal (``Scenario.route_distance``; straight by default)."""
-    g = engine.scenario.route_distance(state.pos, state.goal, state.params)
-    ev = state.vel - state.goal_vel
-    return np.sqrt(g * g + TAU_APPROACH**2 * np.einsum("bnd,bnd->bn", ev, ev))
 
 
 @reward_term(
@@ -83,26 +82,44 @@ def phase_distance(state: EngineState, engine: Any) -> Array:
     "potential shaping that rewards the whole team arriving and coming to rest, as much for the last "
     "centimetres as for the first metres",
 )
-def _approach(ctx: StepContext) -> Array:
-    assert ctx.prev is not None
-    before, after = phase_distance(ctx.prev, ctx.engine), phase_distance(ctx.state, ctx.engine)
-    return np.mean(np.log(EPS_APPROACH + before) - np.log(EPS_APPROACH + after), axis=1)
+def _approach(  # pragma: no cover
+    b: int, out: Array, w: float, vel0: Array, gvel0: Array, vel: Array, gvel: Array, route0: Array, route1: Array
+) -> None:
+    n, d = vel.shape[1], vel.shape[2]
+    acc = 0.0
+    for i in range(n):
+        v0 = v1 = 0.0
+        for k in range(d):
+            v0 += (vel0[b, i, k] - gvel0[b, i, k]) ** 2
+            v1 += (vel[b, i, k] - gvel[b, i, k]) ** 2
+        p0 = math.sqrt(route0[b, i] ** 2 + TAU_APPROACH**2 * v0)
+        p1 = math.sqrt(route1[b, i] ** 2 + TAU_APPROACH**2 * v1)
+        acc += math.log(EPS_APPROACH + p0) - math.log(EPS_APPROACH + p1)
+    for i in range(out.shape[0]):
+        out[i] += w * acc / n
 
 
 @reward_term("formation", 1.0, "-T e(k+1): the affine-image formation error, per second (m s)")
-def _formation(ctx: StepContext) -> Array:
-    return -ctx.engine.dt * ctx.state.err
+def _formation(b: int, out: Array, w: float, dt: float, err: Array) -> None:  # pragma: no cover
+    for i in range(out.shape[0]):
+        out[i] -= w * dt * err[b]
 
 
 @reward_term("effort", 0.01, "-T |a_i|^2 / p: the squared clipped action, per input and second (s)")
-def _effort(ctx: StepContext) -> Array:
-    a = ctx.actions
-    return -(ctx.engine.dt / a.shape[-1]) * np.einsum("blp,blp->bl", a, a)
+def _effort(b: int, out: Array, w: float, dt: float, act: Array) -> None:  # pragma: no cover
+    p = act.shape[2]
+    for i in range(out.shape[0]):
+        acc = 0.0
+        for j in range(p):
+            acc += act[b, i, j] ** 2
+        out[i] -= w * (dt / p) * acc
 
 
 @reward_term("collision", 10.0, "-1 on a collision (agents, obstacles, leaving the world box)")
-def _collision(ctx: StepContext) -> Array:
-    return -ctx.collision.astype(np.float64)
+def _collision(b: int, out: Array, w: float, flags: Bools) -> None:  # pragma: no cover
+    if flags[b, FLAG_COLLISION]:
+        for i in range(out.shape[0]):
+            out[i] -= w
 
 
 #: Clearance (m) below which the ``proximity`` term starts to cost.
@@ -115,13 +132,17 @@ PROXIMITY_MARGIN = 0.3
     "-T max(0, 1 - c / 0.3 m), c the smallest gap between surfaces (agents, obstacles): a warning that grows "
     "from 0 at 0.3 m clearance to 1 per second at contact, before the collision penalty",
 )
-def _proximity(ctx: StepContext) -> Array:
-    return -ctx.engine.dt * np.clip(1.0 - ctx.clearance / PROXIMITY_MARGIN, 0.0, 1.0)
+def _proximity(b: int, out: Array, w: float, dt: float, clear: Array) -> None:  # pragma: no cover
+    v = dt * min(max(1.0 - clear[b] / PROXIMITY_MARGIN, 0.0), 1.0)
+    for i in range(out.shape[0]):
+        out[i] -= w * v
 
 
 @reward_term("success", 10.0, "+1 on success")
-def _success(ctx: StepContext) -> Array:
-    return ctx.success.astype(np.float64)
+def _success(b: int, out: Array, w: float, flags: Bools) -> None:  # pragma: no cover
+    if flags[b, FLAG_SUCCESS]:
+        for i in range(out.shape[0]):
+            out[i] += w
 
 
 @reward_term(
@@ -130,25 +151,18 @@ def _success(ctx: StepContext) -> Array:
     "+T while the scenario's success test holds at this sample (every agent within "
     "goal_tol of its goal, formation error below formation_tol, no collision), per second (s)",
 )
-def _tolerance(ctx: StepContext) -> Array:
-    return ctx.engine.dt * ctx.at_goal.astype(np.float64)
+def _tolerance(b: int, out: Array, w: float, dt: float, flags: Bools) -> None:  # pragma: no cover
+    if flags[b, FLAG_AT_GOAL]:
+        for i in range(out.shape[0]):
+            out[i] += w * dt
 
 
 #: Names of the registered terms, in order.
 REWARD_TERMS: tuple[str, ...] = tuple(TERMS)
+#: The terms that read the route lengths of the scenario's ``route_row`` (``route0``, ``route1``).
+ROUTE_TERMS: tuple[str, ...] = ("approach",)
 #: Default weights of the registered terms.
 DEFAULT_WEIGHTS: dict[str, float] = {t.name: t.weight for t in TERMS.values()}
-
-
-def total_reward(ctx: StepContext, weights: dict[str, float]) -> Array:
-    """sum_t w_t term_t for every leader, shape (B, n_l)."""
-    B, nl = ctx.state.goal_dist.shape
-    out = np.zeros((B, nl))
-    for name, w in weights.items():
-        if w != 0.0:
-            val = TERMS[name].fn(ctx)
-            out += w * (val if val.ndim == 2 else val[:, None])
-    return out
 
 
 def reward_table() -> str:

@@ -2,13 +2,10 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
-
-from .obstacles import Capsules
 
 __all__ = ["EngineState", "StepContext", "StepInfo"]
 
@@ -53,30 +50,11 @@ class EngineState(NamedTuple):
 
 
 class StepContext(NamedTuple):
-    """What observation blocks and reward terms read: one step's measurements, batched over B.
+    """What a step computed beside the new state: every leader's observation ``obs`` (B, n_l, obs_dim) float32
+    and the least-squares affine fit ``theta`` (B, d, d) of all agents (reused by the global state)."""
 
-    ``state`` is the new state (for a reset, the first one) and ``prev`` the one before (None at reset);
-    ``actions`` the clipped leader actions (B, n_l, p) in [-1, 1] (zeros at reset). ``theta`` (B, d, d) and
-    ``b`` (B, d) are the least-squares affine fit of all agents (m); ``clearance`` (B,) the smallest gap
-    between surfaces (m); ``collision``, ``out_of_bounds``, ``success`` (B,) bool; ``at_goal`` (B,) bool: the
-    scenario's success test holds at this sample and nothing collided (``success`` needs ``hold_steps`` of
-    them); ``capsules`` the obstacles at this time; ``rng`` the generator of observation noise (one, or one
-    per environment; None: no noise).
-    """
-
-    engine: Any
-    state: EngineState
-    prev: EngineState | None
-    actions: Array
+    obs: NDArray[np.float32]
     theta: Array
-    b: Array
-    clearance: Array
-    collision: NDArray[np.bool_]
-    out_of_bounds: NDArray[np.bool_]
-    at_goal: NDArray[np.bool_]
-    success: NDArray[np.bool_]
-    capsules: Capsules
-    rng: np.random.Generator | Sequence[np.random.Generator] | None
 
 
 class StepInfo(dict[str, Any]):

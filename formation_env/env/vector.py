@@ -235,7 +235,7 @@ class FormationVecEnv(VecEnv):
             pose, a = self.command.step(self.state, pose, a)
         state, ctx, rew, term, trunc, info = self.engine.advance(self.state, a, self._rngs)
         self.last_info, self.last_terminated, self.last_truncated = info, term, trunc
-        lobs = self.engine.observer(ctx) if self.mode == "shared" else None  # a commander reads the global state
+        lobs = ctx.obs if self.mode == "shared" else None  # a commander reads the global state
         obs = self._observe(state, lobs, pose=pose, ctx=ctx)
         rews = (rew.reshape(-1) if k > 1 else rew.mean(axis=1)).astype(np.float32)
         done_env = term | trunc

@@ -5,9 +5,12 @@ the engine owns the dynamics, the follower law, contacts, observations and rewar
 hooks of :class:`Scenario`: ``_init`` reads its own keyword arguments (unknown ones are refused); ``draws`` and
 ``build`` give the episode's random draws in stream order (:class:`Draw`) and the draw-free, batched map from
 them to the per-episode arrays (obstacles under their types' keys), from which the base class makes
-``reset(rng, B)`` and ``reset_each(rngs)`` (the vectorised env's auto-reset); ``reference`` (moving goals);
-``param_vector`` and ``decode_params`` (the task in the global state); ``task_features`` (the ``task``
-observation block); ``is_success``.
+``reset(rng, B)`` and ``reset_each(rngs)`` (the vectorised env's auto-reset); ``reference`` and ``goal_vector``
+(moving goals); ``param_vector`` and ``decode_params`` (the task in the global state). Three compiled rows
+(:mod:`~formation_env.env.kernel`) run inside the step: ``pose_row`` (a moving goal's pose), ``route_row`` (the
+``approach`` potential's route) and ``task_row`` (the ``task`` observation block). Success at a sample: every
+agent within ``goal_tol`` of its goal and the formation error below ``formation_tol``, for ``hold_steps``
+samples in a row.
 
 Goal poses are affine images x_i* = Theta r_i + b (paper eq. 7) of the nominal configuration r; every pose
 array is batched: Theta (B, d, d), b (B, d).
@@ -18,7 +21,7 @@ from __future__ import annotations
 import functools
 import math
 from collections.abc import Callable, Sequence
-from typing import TYPE_CHECKING, Any, ClassVar, NamedTuple
+from typing import Any, ClassVar, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -27,10 +30,8 @@ from formation_env.core.errors import FormationError
 from formation_env.core.framework import Framework
 from formation_env.core.validation import check_int, check_kwargs_consumed, check_real_scalar
 
+from ..kernel import straight_route
 from ..obstacles import Obstacle
-
-if TYPE_CHECKING:
-    from ..state import StepContext
 
 __all__ = [
     "NAMED_FRAMEWORKS",
@@ -224,6 +225,16 @@ class Scenario:
         """Goal pose at times t (B,) s: Theta (B, d, d), b (B, d). Static goals return the reset pose."""
         return params["goal_theta"], params["goal_b"]
 
+    #: Compiled hooks of the step (:mod:`formation_env.env.kernel`): the moving goal's pose (None: static),
+    #: the ``approach`` potential's route, the ``task`` observation block (None: no entries).
+    pose_row: Any = None
+    route_row: Any = staticmethod(straight_route)
+    task_row: Any = None
+
+    def goal_vector(self, params: dict[str, Array]) -> Array:
+        """What ``pose_row`` reads of each episode's moving goal, (B, w); none for a static goal."""
+        return np.zeros((next(iter(params.values())).shape[0], 0))
+
     def param_vector(self, params: dict[str, Array]) -> Array:
         """Scenario parameters for the global state, shape (B, k) (k = len(param_low))."""
         return np.zeros((next(iter(params.values())).shape[0], 0))
@@ -243,24 +254,9 @@ class Scenario:
         global state (the inverse of :meth:`param_vector` where it is one); none by default."""
         return {}
 
-    def task_features(self, ctx: StepContext) -> Array:
-        """The ``task`` observation block of every leader, (B, n_l, k); none by default."""
-        return np.zeros((ctx.state.pos.shape[0], ctx.engine.n_l, 0))
-
     def task_feature_bounds(self) -> tuple[Array, Array]:
-        """(low, high) of :meth:`task_features`' entries, each (k,)."""
+        """(low, high) of the ``task_row`` entries, each (k,)."""
         return np.zeros(0), np.zeros(0)
-
-    def route_distance(self, pos: Array, goal: Array, params: dict[str, Array]) -> Array:
-        """Length (m) of the shortest obstacle-respecting route from each position to its goal, as far as the
-        scenario knows it (the ``approach`` reward's potential): pos, goal (B, m, d) -> (B, m). Straight lines
-        by default; a scenario whose obstacles block them says how to go round."""
-        return np.linalg.norm(goal - pos, axis=-1)
-
-    def is_success(self, goal_distance: Array, formation_error: Array) -> NDArray[np.bool_]:
-        """Success at one sample: every agent within ``goal_tol`` of its goal and formation error below
-        ``formation_tol``. goal_distance (B,) is the largest agent distance (m); returns (B,) bool."""
-        return (goal_distance < self.goal_tol) & (formation_error < self.formation_tol)
 
     def fit_world(self) -> None:
         """Fit the world box to a large framework, or refuse the framework (FormationError).

@@ -9,7 +9,7 @@ Per episode (uniform draws from the seed's generator; ranges are keyword argumen
   axis 1 in [-0.3, 0.3], each scale factor in [0.6, 1.4]; b_g in [-2, 2]^d.
 
 ``route="turn"`` (2D) makes the ``approach`` reward's route a turn instead of a straight line: each agent goes
-with the team's centroid, and round it by the team's rotation (see :meth:`Hold.route_distance`). Straight lines
+with the team's centroid, and round it by the team's rotation (see :func:`turn_route`). Straight lines
 through the centroid collapse the formation on large rotations; the turn keeps it apart.
 
 ``start="paper"`` reproduces the paper's simulation (Section 4.3) on its 5-agent framework:
@@ -21,17 +21,44 @@ below ``formation_tol`` = 0.05 m for ``hold_steps`` = 10 consecutive samples; it
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
 
 from formation_env.core.errors import FormationError
 
+from .._numba import jit
+from ..kernel import straight_route
 from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
 
 __all__ = ["Hold"]
 
 PAPER_FOLLOWER_START = np.array([[-4.0, 3.0], [-3.0, -2.0]])
+
+
+@jit
+def turn_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
+    """``route="turn"``: the centroid's straight path |c_g - c|, then round the centroid: with p_i = x_i - c,
+    q_i = x_i* - c_g, radius r_i = (|p_i| + |q_i|) / 2 and turn delta_i (from p_i to q_i, on the side of the
+    team's least-squares rotation phi = atan2(sum p_i x q_i, sum p_i . q_i)), the spiral's length
+    sqrt((|q_i| - |p_i|)^2 + (r_i delta_i)^2). pos, goal (n, 2) -> out (n,), m."""
+    n = pos.shape[0]
+    c, cg = pos.sum(axis=0) / n, goal.sum(axis=0) / n
+    cross_sum = dot_sum = 0.0
+    for i in range(n):
+        px, py, qx, qy = pos[i, 0] - c[0], pos[i, 1] - c[1], goal[i, 0] - cg[0], goal[i, 1] - cg[1]
+        cross_sum += px * qy - py * qx
+        dot_sum += px * qx + py * qy
+    phi = math.atan2(cross_sum, dot_sum)
+    shift = math.hypot(cg[0] - c[0], cg[1] - c[1])
+    for i in range(n):
+        px, py, qx, qy = pos[i, 0] - c[0], pos[i, 1] - c[1], goal[i, 0] - cg[0], goal[i, 1] - cg[1]
+        own = math.atan2(px * qy - py * qx, px * qx + py * qy)  # each agent's own turn, in (-pi, pi]
+        x = own - phi + math.pi
+        delta = phi + (x - 2.0 * math.pi * math.floor(x / (2.0 * math.pi))) - math.pi  # on the team's side
+        rp, rq = math.hypot(px, py), math.hypot(qx, qy)
+        out[i] = shift + math.hypot(rq - rp, 0.5 * (rp + rq) * delta)
 
 
 class Hold(Scenario):
@@ -77,21 +104,10 @@ class Hold(Scenario):
         out += [Draw("b_g", (d,), bounds=self.goal_b)]
         return out + (self.follower_draws() if self.start == "random" else [])
 
-    def route_distance(self, pos: Array, goal: Array, params: dict[str, Array]) -> Array:
-        """``route="turn"``: the centroid's straight path |c_g - c|, then round the centroid: with p_i = x_i - c,
-        q_i = x_i* - c_g, radius r_i = (|p_i| + |q_i|) / 2 and turn delta_i (from p_i to q_i, on the side of the
-        team's least-squares rotation phi = atan2(sum p_i x q_i, sum p_i . q_i)), the spiral's length
-        sqrt((|q_i| - |p_i|)^2 + (r_i delta_i)^2). Straight lines otherwise. pos, goal (B, m, 2) -> (B, m), m."""
-        if self.route == "straight":
-            return super().route_distance(pos, goal, params)
-        c, cg = pos.mean(axis=1, keepdims=True), goal.mean(axis=1, keepdims=True)
-        p, q = pos - c, goal - cg
-        cross = p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
-        phi = np.arctan2(cross.sum(axis=1), np.einsum("bmd,bmd->b", p, q))[:, None]
-        own = np.arctan2(cross, np.einsum("bmd,bmd->bm", p, q))  # each agent's own turn, in (-pi, pi]
-        delta = phi + (own - phi + np.pi) % (2 * np.pi) - np.pi  # the same turn, taken on the team's side
-        rp, rq = np.linalg.norm(p, axis=-1), np.linalg.norm(q, axis=-1)
-        return np.linalg.norm(cg - c, axis=-1) + np.hypot(rq - rp, 0.5 * (rp + rq) * delta)
+    @property
+    def route_row(self) -> Any:
+        """The ``approach`` potential's route: :func:`turn_route` for ``route="turn"``, else straight."""
+        return turn_route if self.route == "turn" else straight_route
 
     def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
         d = self.d

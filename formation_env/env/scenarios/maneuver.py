@@ -24,10 +24,12 @@ reference and the formation error below 0.05 m; the last sample's value is the e
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
 
+from .._numba import jit
 from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
 
 __all__ = ["WINDOWS", "Maneuver", "smoothstep"]
@@ -41,10 +43,47 @@ WINDOWS: dict[str, tuple[float, float]] = {
 }
 
 
-def smoothstep(t: Array, start: float, stop: float) -> Array:
-    """0 before start, 1 after stop, 3 s^2 - 2 s^3 between (as ``core.affine._ramp``), shape of t."""
-    s = np.clip((t - start) / (stop - start), 0.0, 1.0)
+@jit
+def smoothstep(t: float, start: float, stop: float) -> float:
+    """0 before start, 1 after stop, 3 s^2 - 2 s^3 between (as ``core.affine._ramp``)."""
+    s = min(max((t - start) / (stop - start), 0.0), 1.0)
     return s * s * (3.0 - 2.0 * s)
+
+
+@jit
+def pose_row(gp: Array, t: float, out: Array) -> None:  # pragma: no cover
+    """The reference pose [Theta(t), b(t)] (d, d + 1) of one episode at time t (s) from its ``goal_p`` (w,):
+    Theta0 (d^2, row-major), b0 (d), offset (d), angle, scale (d), shear, axis (3, in 3D), then the
+    windows' (start, stop) of translate, rotate, scale, shear (s). Theta = Sh S R Theta0, b = b0 + offset
+    ramp (the module docstring)."""
+    d = out.shape[0]
+    i = d * d
+    b0, offset = gp[i : i + d], gp[i + d : i + 2 * d]
+    angle, scale, shear = gp[i + 2 * d], gp[i + 2 * d + 1 : i + 3 * d + 1], gp[i + 3 * d + 1]
+    win = gp[gp.size - 8 :]
+    a = angle * smoothstep(t, win[2], win[3])
+    co, si = math.cos(a), math.sin(a)
+    rot = np.empty((d, d))
+    if d == 2:
+        rot[0, 0], rot[0, 1], rot[1, 0], rot[1, 1] = co, -si, si, co
+    else:
+        ax = gp[i + 3 * d + 2 : i + 3 * d + 5]
+        k = ax / math.sqrt(np.sum(ax * ax))
+        kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+        rot[:] = np.eye(3) + si * kx + (1.0 - co) * (kx @ kx)
+    theta = rot @ gp[:i].reshape(d, d)
+    fs = smoothstep(t, win[4], win[5])
+    for r in range(d):
+        theta[r] *= 1.0 + fs * (scale[r] - 1.0)
+    theta[0] += shear * smoothstep(t, win[6], win[7]) * theta[1]
+    out[:, :d] = theta
+    out[:, d] = b0 + smoothstep(t, win[0], win[1]) * offset
+
+
+@jit
+def _pose_rows(gp: Array, t: Array, out: Array) -> None:  # pragma: no cover
+    for b in range(gp.shape[0]):
+        pose_row(gp[b], t[b], out[b])
 
 
 class Maneuver(Scenario):
@@ -103,13 +142,18 @@ class Maneuver(Scenario):
         pose = self.reference(params, np.zeros(B))
         return params, pose
 
+    pose_row = staticmethod(pose_row)
+
+    def goal_vector(self, params: dict[str, Array]) -> Array:
+        """The ``goal_p`` of :func:`pose_row` (B, w)."""
+        B = params["b0"].shape[0]
+        parts = [params["theta0"].reshape(B, -1), params["b0"], params["offset"], params["angle"][:, None]]
+        parts += [params["scale"], params["shear"][:, None]]
+        parts += [params["axis"]] if self.d == 3 else []
+        parts.append(np.broadcast_to(np.array([v for key in WINDOWS for v in self._win[key]]), (B, 8)))
+        return np.ascontiguousarray(np.concatenate(parts, axis=1), dtype=np.float64)
+
     def reference(self, params: dict[str, Array], t: Array) -> tuple[Array, Array]:
-        w = self._win
-        d = self.d
-        a_rot = params["angle"] * smoothstep(t, *w["rotate"])
-        rot = rotation_2d(a_rot) if d == 2 else rotation_3d(params["axis"], a_rot)
-        f = 1.0 + smoothstep(t, *w["scale"])[:, None] * (params["scale"] - 1.0)  # (B, d)
-        theta = f[:, :, None] * (rot @ params["theta0"])  # S R Theta0
-        theta[:, 0, :] += (params["shear"] * smoothstep(t, *w["shear"]))[:, None] * theta[:, 1, :]  # Sh
-        b = params["b0"] + smoothstep(t, *w["translate"])[:, None] * params["offset"]
-        return theta, b
+        out = np.empty((t.shape[0], self.d, self.d + 1))
+        _pose_rows(self.goal_vector(params), np.asarray(t, dtype=np.float64), out)
+        return out[:, :, : self.d], out[:, :, self.d]

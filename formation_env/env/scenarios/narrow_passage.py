@@ -26,21 +26,55 @@ half-extent along y with the discs (the room left; negative: the formation must 
 
 from __future__ import annotations
 
+import math
 import warnings
-from typing import TYPE_CHECKING, Any, ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import NDArray
 
+from .._numba import jit
 from ..obstacles import Segment
 from ._base import Array, Draw, Scenario, check_range, rotation_2d
-
-if TYPE_CHECKING:
-    from ..state import StepContext
 
 __all__ = ["ROUTE_MARGIN", "NarrowPassage"]
 
 #: Room (m) the ``approach`` reward's route keeps between an agent's disc and the gap's edges.
 ROUTE_MARGIN = 0.05
+
+
+@jit
+def task_row(  # pragma: no cover
+    b: int, out: Array, lo: int, leaders: NDArray[np.int64], pos: Array, pvec: Array, bfit: Array, radius: float
+) -> None:
+    """The ``task`` block: wall_x - x_i, gap_center - b_y (b the affine fit's translation), and the room left
+    in the gap, gap_width / 2 minus the team's half-height with the discs (m)."""
+    lo_y, hi_y = np.inf, -np.inf
+    for j in range(pos.shape[1]):
+        lo_y, hi_y = min(lo_y, pos[b, j, 1]), max(hi_y, pos[b, j, 1])
+    half = 0.5 * (hi_y - lo_y) + radius
+    for i, a in enumerate(leaders):
+        out[i, lo] = pvec[b, 0] - pos[b, a, 0]
+        out[i, lo + 1] = pvec[b, 1] - bfit[b, 1]
+        out[i, lo + 2] = 0.5 * pvec[b, 2] - half
+
+
+@jit
+def route_row(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
+    """Through the gap: an agent before the wall goes straight to the crossing point (x_w, y*), y* the
+    straight line's crossing clipped to the part of the gap its disc fits through with ``ROUTE_MARGIN`` m
+    to spare, then straight to its goal; beyond the wall, straight. pvec = (wall_x, gap_center, gap_width),
+    pos, goal (n, 2) -> out (n,), m."""
+    xw, yc, w = pvec[0], pvec[1], pvec[2]
+    room = max(0.5 * w - radius - ROUTE_MARGIN, 0.0)
+    for i in range(pos.shape[0]):
+        px, py, gx, gy = pos[i, 0], pos[i, 1], goal[i, 0], goal[i, 1]
+        if px < xw:
+            frac = min(max((xw - px) / max(gx - px, 1e-9), 0.0), 1.0)
+            ys = min(max(py + frac * (gy - py), yc - room), yc + room)
+            out[i] = math.hypot(xw - px, ys - py) + math.hypot(gx - xw, gy - ys)
+        else:
+            out[i] = math.hypot(gx - px, gy - py)
 
 
 class NarrowPassage(Scenario):
@@ -117,27 +151,8 @@ class NarrowPassage(Scenario):
     def param_high(self) -> Array:
         return np.array([self.wall_x[1], self.gap_center[1], self.gap_width[1]])
 
-    def task_features(self, ctx: StepContext) -> Array:
-        p = ctx.state.params
-        eng = ctx.engine
-        pos = ctx.state.pos
-        half = 0.5 * (pos[:, :, 1].max(axis=1) - pos[:, :, 1].min(axis=1)) + self.agent_radius
-        per_env = np.stack([ctx.b[:, 1], p["gap_center"] - ctx.b[:, 1], 0.5 * p["gap_width"] - half], axis=-1)
-        out = np.repeat(per_env[:, None, :], eng.n_l, axis=1)
-        out[:, :, 0] = p["wall_x"][:, None] - pos[:, eng.leaders, 0]
-        return out
-
-    def route_distance(self, pos: Array, goal: Array, params: dict[str, Array]) -> Array:
-        """Through the gap: an agent before the wall goes straight to the crossing point (x_w, y*), y* the
-        straight line's crossing clipped to the part of the gap its disc fits through with ``ROUTE_MARGIN`` m
-        to spare, then straight to its goal; beyond the wall, straight. pos, goal (B, m, 2) -> (B, m), m."""
-        xw, yc = params["wall_x"][:, None], params["gap_center"][:, None]
-        room = np.maximum(0.5 * params["gap_width"][:, None] - self.agent_radius - ROUTE_MARGIN, 0.0)
-        px, py, gx, gy = pos[..., 0], pos[..., 1], goal[..., 0], goal[..., 1]
-        frac = np.clip((xw - px) / np.maximum(gx - px, 1e-9), 0.0, 1.0)
-        ys = np.clip(py + frac * (gy - py), yc - room, yc + room)
-        via = np.hypot(xw - px, ys - py) + np.hypot(gx - xw, gy - ys)
-        return np.where(px < xw, via, np.hypot(gx - px, gy - py))
+    task_row = staticmethod(task_row)
+    route_row = staticmethod(route_row)
 
     def task_feature_bounds(self) -> tuple[Array, Array]:
         ext = self.bounds[1] - self.bounds[0]

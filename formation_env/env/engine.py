@@ -5,10 +5,10 @@ Every array starts with the batch dim B (VMAS style), so the PettingZoo env (B =
 holds only constants; the state is passed in and a new one returned (gymnax style). Randomness comes only
 from the generators given to :meth:`Engine.reset` and :meth:`Engine.step` (observation noise).
 
-One step, in order (``docs/architecture.md`` has the picture): the followers' law and the sampled dynamics
-(:mod:`~formation_env.env.config`); the obstacles' capsules at the new time (:mod:`~formation_env.env.obstacles`);
-contacts; goal distances, the affine fit, success and the episode end; then observations and rewards from the
-step's :class:`StepContext`.
+One step, in order (``docs/architecture.md`` has the picture), compiled by :mod:`~formation_env.env.kernel`:
+the followers' law and the sampled dynamics (:mod:`~formation_env.env.config`); the obstacles' capsules at the
+new time (:mod:`~formation_env.env.obstacles`); contacts; goal distances, the affine fit, success and the
+episode end; then the rewards and the observations.
 """
 
 from __future__ import annotations

@@ -1,18 +1,20 @@
 """The compiled step: one numba implementation of a step, composed per engine from its components.
 
-A step runs environment by environment (row b): :func:`advance_row` moves the agents and judges contacts, the
-goal and success; then the engine's reward terms fill the rewards and its observation blocks the
-observations. The components are ``numba.njit`` functions of the step's arrays ``s`` (:class:`StepArrays`)
-and the row b:
+A step runs environment by environment (row b): :func:`move_row` (law and dynamics), the capsules, then
+:func:`contacts_row`, the goal and :func:`judge_row` (goal distances, affine fit, success, the episode's end);
+then the engine's reward terms fill the rewards and its observation blocks the observations. Every part and
+every component is a numba function of the row ``b`` and of the arrays it reads, its parameters named after
+the fields of :class:`StepArrays`, :class:`Consts` and :class:`Episode` (:func:`call`):
 
-* an observation block ``row(s, b, out, lo)`` writes every leader's entries into ``out[i, lo:lo + size]``;
-* a reward term ``row(s, b, out)`` adds every leader's value to ``out`` (n_l,), times its weight;
+* an observation block ``row(b, out, lo, ...)`` writes every leader's entries into ``out[i, lo:lo + size]``;
+* a reward term ``row(b, out, w, ...)`` adds w times every leader's value to ``out`` (n_l,);
 * a scenario's ``route_row(pvec, radius, pos, goal, out)`` writes each agent's route length (m) to its goal
   (the ``approach`` potential) given the episode's parameters ``pvec`` (k,) and the agent radius (m), pos,
-  goal (n, d) -> out (n,).
+  goal (n, d) -> out (n,); its ``pose_row(goal_p, t, out)`` the pose of a moving goal; a moving obstacle
+  type's ``row`` its capsules at time t.
 
-:func:`compose` writes the source that calls an engine's components in order and compiles it once per
-distinct composition (cached on disk). The constants (:class:`Consts`) and the episode's arrays
+:func:`compose` writes the source that calls an engine's parts and components in order and compiles it once
+per distinct composition (cached on disk). The constants (:class:`Consts`) and the episode's arrays
 (:class:`Episode`) are made once and reused; the step's outputs are allocated inside the compiled code.
 """
 
@@ -35,7 +37,7 @@ from numpy.typing import NDArray
 from ._numba import jit
 from .obstacles import path_clearance, point_clearance
 
-__all__ = ["Consts", "Episode", "StepArrays", "compose", "fit_rows", "jit", "straight_route"]
+__all__ = ["Consts", "Episode", "Outputs", "StepArrays", "call", "compose", "fit_rows", "jit", "straight_route"]
 
 Array = NDArray[np.float64]
 Ints = NDArray[np.int64]
@@ -106,8 +108,9 @@ class StepArrays(NamedTuple):
     formation error (m), ``theta`` (B, d, d), ``bfit`` (B, d) the affine fit, ``clear`` (B,) the smallest gap
     between surfaces (m), ``gmax`` (B,) the largest goal distance (m), ``flags`` (B, 6) bool: collision,
     out of bounds, at goal, success, terminated, truncated (the ``FLAG_*`` columns); ``effort`` (B, n_l)
-    = |u_i|^2; ``cur_a``, ``cur_e`` (B, m, d), ``cur_r`` (B, m) every capsule now; ``route0``, ``route1``
-    (B, n) route lengths before and after (when a term reads them)."""
+    = |u_i|^2; ``cur_a``, ``cur_e`` (B, m, d), ``cur_r`` (B, m) every capsule now and ``old_a`` (B, m, d)
+    their axes' starts a sample before; ``route0``, ``route1`` (B, n) route lengths before and after (when a
+    term reads them)."""
 
     c: Consts
     ep: Episode

@@ -115,8 +115,9 @@ class Engine:
 
     Contacts (collisions): two agents closer than 2 radii, an agent centre within one radius of an obstacle's
     surface, an agent centre outside the world box. They are judged at the samples, and along the whole step
-    (the agent's straight motion relative to each obstacle) in an env where some agent or obstacle moved more
-    than 2 radii / sqrt(d) along an axis in that step, so that nothing fast tunnels through a wall.
+    (the agent's straight motion relative to each obstacle) in an env where the largest move of an agent plus
+    that of an obstacle along an axis exceeds 2 radii / sqrt(d) in that step, so that nothing fast tunnels
+    through a wall or past a moving disc.
     """
 
     theta_clip: float = 3.0

@@ -270,10 +270,11 @@ def contacts_row(  # pragma: no cover
         for i in range(n):
             for c in range(d):
                 moved = max(moved, abs(pos[b, i, c] - pos0[b, i, c]))
+        shift = 0.0  # the obstacles' own motion: the relative one is at most the sum
         for j in range(cur_r.shape[1]):
             for c in range(d):
-                moved = max(moved, abs(cur_a[b, j, c] - old_a[b, j, c]))
-        if moved > fast:
+                shift = max(shift, abs(cur_a[b, j, c] - old_a[b, j, c]))
+        if moved + shift > fast:
             gap = min(gap, path_clearance(pos0[b], pos[b], old_a[b], cur_a[b], cur_e[b], cur_r[b]) - radius)
     oob = False
     for i in range(n):

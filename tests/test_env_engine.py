@@ -254,6 +254,28 @@ def test_moving_obstacles_geometry_and_contacts():
     assert hit
 
 
+def test_an_agent_and_a_disc_that_pass_through_each_other_in_one_step_collide():
+    """Each moves 0.115 m (under the 0.141 m swept threshold alone), together 0.23 m: both samples are clear, the
+    relative motion crosses the disc, so the swept check must run and find the contact."""
+    eng = Engine("moving_obstacles", "single_integrator", "dynamic", u_max=1.15, n_moving=1, follower_noise=0.0)
+    s = eng.reset(np.random.default_rng(0), 1)
+    lead = int(eng.leaders[0])
+    x = s.x - s.x[:, lead : lead + 1]  # the formation moved so that leader 0 is at the origin
+    contacts = []
+    for vx in (-1.15, 1.15):  # toward the agent (they cross), and away from it (they never meet)
+        disc = np.array([[[0.115, 0.0, vx, 0.0, 0.01]]])
+        params = {**s.params, "moving_circles": disc, "_mov_p": disc}
+        one = s._replace(x=x, pos=x.copy(), params=params)
+        a = np.zeros((1, eng.n_l, eng.p))
+        a[0, :, 0] = 1.0  # the team translates 0.115 m toward +x
+        new, _, _, _, _, info = eng.step(one, a)
+        assert np.abs(new.pos - one.pos).max() < 0.12  # no agent moved past the threshold on its own
+        end_gap = abs(new.pos[0, lead, 0] - (0.115 + vx * eng.dt)) - eng.agent_radius - 0.01
+        assert end_gap > 0.0  # clear at both samples
+        contacts.append(bool(info["collision"][0]))
+    assert contacts == [True, False]
+
+
 def test_fast_step_through_a_wall_is_a_collision():
     """A leader jumping 3 m across the wall in one step collides (swept check), though both samples are clear."""
     eng = Engine(

@@ -527,6 +527,23 @@ def call(fn: Any, alias: str = "", **given: str) -> str:
     return f"{alias or py.__name__}({', '.join(given.get(nm, nm) for nm in names)})"
 
 
+def cache_folder() -> str:
+    """Where the composed steps are written: ``$FORMATION_ENV_CACHE``, else ``$XDG_CACHE_HOME/formation_env`` (by
+    default ``~/.cache/formation_env``), else, when that cannot be written, a folder of this user's in the
+    temporary folder."""
+    given = os.environ.get("FORMATION_ENV_CACHE")
+    home = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    mine = os.path.join(tempfile.gettempdir(), f"formation_env_{os.getuid()}")
+    for folder in [given] if given else [os.path.join(home, "formation_env"), mine]:
+        try:
+            os.makedirs(folder, exist_ok=True)
+        except OSError:
+            continue
+        if os.access(folder, os.W_OK):
+            return folder
+    raise OSError(f"no writable folder for the compiled steps; set FORMATION_ENV_CACHE (tried {given or home!r})")
+
+
 def compose(
     blocks: Sequence[tuple[Any, int]], terms: Sequence[Any], route: Any, moving: Any = None, pose: Any = None
 ) -> Any:
@@ -538,7 +555,7 @@ def compose(
     ``row(p (M, w), t, bounds, a (M, d), e (M, d), rad (M,))`` or None; ``pose``: the scenario's
     ``pose_row(goal_p (w,), t, out (d, d + 1))`` of a moving goal, or None (a static goal). Each component's
     arguments are named after the step's arrays (:func:`call`). The source is written to a cache folder
-    (``FORMATION_ENV_CACHE``, else the temporary folder), named by its hash and its components', and compiled
+    (:func:`cache_folder`), named by its hash and its components', and compiled
     with numba's disk cache, so a composition compiles once per machine.
     """
     funcs = [fn for fn, _ in blocks] + list(terms) + [f for f in (route, moving, pose) if f is not None]
@@ -580,8 +597,7 @@ def compose(
     code = [inspect.getsource(sys.modules[__name__])] + [_source(fn) for fn in funcs]
     key = hashlib.sha1("".join([src, *code]).encode()).hexdigest()[:16]
     if key not in _COMPOSED:
-        folder = os.environ.get("FORMATION_ENV_CACHE") or os.path.join(tempfile.gettempdir(), "formation_env_steps")
-        os.makedirs(folder, exist_ok=True)
+        folder = cache_folder()
         path = os.path.join(folder, f"step_{key}.py")
         if not os.path.exists(path):
             tmp = f"{path}.{os.getpid()}"

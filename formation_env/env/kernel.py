@@ -375,41 +375,10 @@ def arrays(  # pragma: no cover
     else:
         x, mem, pos, vel, goal, gvel, k, gdist, streak = x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0
     return StepArrays(
-        c,
-        ep,
-        x0,
-        mem0,
-        pos0,
-        vel0,
-        goal0,
-        gvel0,
-        k0,
-        gdist0,
-        streak0,
-        act,
-        x,
-        mem,
-        pos,
-        vel,
-        goal,
-        gvel,
-        k,
-        gdist,
-        streak,
-        e(B),
-        e((B, d, d)),
-        e((B, d)),
-        np.full(B, np.inf),
-        e(B),
-        np.zeros((B, 6), np.bool_),
-        np.zeros(act.shape[:2]),
-        e((B, m, d)),
-        e((B, m, d)),
-        e((B, m)),
-        e((B, m, d)),
-        e((B, n)),
-        e((B, n)),
-    )
+        c, ep, x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0, act, x, mem, pos, vel, goal, gvel, k, gdist,
+        streak, e(B), e((B, d, d)), e((B, d)), np.full(B, np.inf), e(B), np.zeros((B, 6), np.bool_),
+        np.zeros(act.shape[:2]), e((B, m, d)), e((B, m, d)), e((B, m)), e((B, m, d)), e((B, n)), e((B, n)),
+    )  # fmt: skip
 
 
 class Outputs(NamedTuple):

@@ -182,6 +182,33 @@ def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -
     np.testing.assert_allclose(phase_distance(eng, at_rest_on_goal), 0.0)
 
 
+def test_route_progress_telescopes_to_each_leaders_route_length_gained() -> None:
+    """Summed over steps, ``route_progress`` is each leader's route length at the start minus at the end (through
+    the gap on ``narrow_passage``), and on a straight route it equals ``progress``."""
+    off = {"progress": 0, "formation": 0, "effort": 0, "distance": 0, "collision": 0, "success": 0}
+    for name in ("narrow_passage", "hold"):
+        eng = Engine(name, reward_weights={**off, "route_progress": 1.0})
+        s0 = s = eng.reset(np.random.default_rng(3), 2)
+        rng = np.random.default_rng(4)
+        total = np.zeros((2, eng.n_l))
+        for _ in range(15):
+            s, _, r, *_ = eng.step(s, rng.uniform(-1, 1, (2, eng.n_l, eng.p)))
+            total += r
+        pvec = s0.params["_pvec"]
+
+        def route(st, pvec=pvec, eng=eng):
+            return route_lengths(eng.scenario.route_row, pvec, eng.agent_radius, st.pos, st.goal)[:, eng.leaders]
+
+        np.testing.assert_allclose(total, route(s0) - route(s), rtol=1e-9, atol=1e-12)
+        if name == "hold":
+            straight = Engine(name, reward_weights={**off, "progress": 1.0})
+            s = straight.reset(np.random.default_rng(3), 2)
+            a = rng.uniform(-1, 1, (2, eng.n_l, eng.p))
+            np.testing.assert_allclose(straight.step(s, a)[2], eng.step(s, a)[2], rtol=1e-12)
+        else:
+            assert not np.allclose(route(s0), np.linalg.norm(s0.goal - s0.pos, axis=-1)[:, eng.leaders])
+
+
 def test_narrow_passage_route_goes_through_the_gap() -> None:
     """Before the wall the route bends through the gap (never shorter than the straight line); aligned with the
     gap or beyond the wall it is the straight line."""

@@ -62,6 +62,19 @@ def _progress(b: int, out: Array, w: float, gdist0: Array, gdist: Array) -> None
         out[i] += w * (gdist0[b, i] - gdist[b, i])
 
 
+@reward_term(
+    "route_progress",
+    0.0,
+    "r_i(k) - r_i(k+1): the leader's approach to its goal position along its route (m; the route of "
+    "``approach``: round the obstacles the scenario knows, straight by default, then equal to ``progress``)",
+)
+def _route_progress(  # pragma: no cover
+    b: int, out: Array, w: float, leaders: NDArray[np.int64], route0: Array, route1: Array
+) -> None:
+    for i in range(out.shape[0]):
+        out[i] += w * (route0[b, leaders[i]] - route1[b, leaders[i]])
+
+
 @reward_term("distance", 0.0, "-T g_i(k+1): the leader's distance to its goal, per second (m s)")
 def _distance(b: int, out: Array, w: float, dt: float, gdist: Array) -> None:  # pragma: no cover
     for i in range(out.shape[0]):
@@ -160,7 +173,7 @@ def _tolerance(b: int, out: Array, w: float, dt: float, flags: Bools) -> None:  
 #: Names of the registered terms, in order.
 REWARD_TERMS: tuple[str, ...] = tuple(TERMS)
 #: The terms that read the route lengths of the scenario's ``route_row`` (``route0``, ``route1``).
-ROUTE_TERMS: tuple[str, ...] = ("approach",)
+ROUTE_TERMS: tuple[str, ...] = ("approach", "route_progress")
 #: Default weights of the registered terms.
 DEFAULT_WEIGHTS: dict[str, float] = {t.name: t.weight for t in TERMS.values()}
 

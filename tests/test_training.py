@@ -292,3 +292,16 @@ def test_json_flags_refuse_what_is_not_a_json_object(flag: str, capsys) -> None:
             leaders_main([flag, bad, "--smoke"])
         assert exc.value.code == 2
         assert f"{flag} must be a JSON object" in capsys.readouterr().err
+
+
+def test_linear_schedule_strings_become_schedules_and_others_are_refused() -> None:
+    from train.leaders import LinearSchedule, schedules
+
+    hp = schedules({"learning_rate": "lin_3e-4", "clip_range": 0.2, "n_steps": 256})
+    lr = hp["learning_rate"]
+    assert isinstance(lr, LinearSchedule)
+    assert lr(1.0) == pytest.approx(3e-4) and lr(0.25) == pytest.approx(7.5e-5) and lr(0.0) == 0.0
+    assert hp["clip_range"] == 0.2 and hp["n_steps"] == 256
+    for bad in ("exp_3e-4", "lin_fast", "3e-4"):
+        with pytest.raises(ValueError, match="learning_rate"):
+            schedules({"learning_rate": bad})

@@ -97,6 +97,36 @@ def load_config(path: str | Path) -> dict[str, Any]:
     return cfg
 
 
+class LinearSchedule:
+    """A value shrinking linearly to 0 over training (``"lin_<value>"`` in a recipe, as in RL Zoo): SB3 calls it with
+    the fraction of training left, 1 at the start and 0 at the end."""
+
+    def __init__(self, initial: float) -> None:
+        self.initial = float(initial)
+
+    def __call__(self, remaining: float) -> float:
+        return remaining * self.initial
+
+
+def schedules(hp: dict[str, Any]) -> dict[str, Any]:
+    """``hp`` with every ``"lin_<value>"`` string (e.g. ``learning_rate: lin_3e-4``) as a :class:`LinearSchedule`;
+    another string raises ValueError naming the key."""
+    out = dict(hp)
+    for key, val in hp.items():
+        if isinstance(val, str):
+            try:
+                if not val.startswith("lin_"):
+                    raise ValueError
+                out[key] = LinearSchedule(float(val[4:]))
+            except ValueError:
+                msg = (
+                    f"algo_kwargs[{key!r}]: a string must be 'lin_<number>' (linear to 0), got {val!r} (YAML reads "
+                    "3e-4 as a string: write 3.0e-4)"
+                )
+                raise ValueError(msg) from None
+    return out
+
+
 class ResidualVecEnv(VecEnvWrapper):
     """Commander actions as corrections of the analytic planner: a = clip(planner + scale * action, -1, 1).
 
@@ -359,7 +389,7 @@ def train(
         device="cpu",
         tensorboard_log=str(out / "tb"),
         verbose=0,
-        **hp,
+        **schedules(hp),
     )
     curve = CurveCallback()
     ckpt = CheckpointCallback(

@@ -42,6 +42,15 @@ Array = NDArray[np.float64]
 POLICY_DIR = Path(__file__).resolve().parent / "pretrained"
 
 
+def _zero(_: float) -> float:
+    return 0.0
+
+
+#: What a saved model's training schedules load as: acting needs none, so they are not unpickled (as in RL Zoo's
+#: enjoy script), whatever the trainer made them of.
+_INFERENCE_ONLY: dict[str, Any] = {"learning_rate": 0.0, "lr_schedule": _zero, "clip_range": _zero}
+
+
 def _engine_of(env: Any) -> Engine:
     if isinstance(env, Engine):
         return env
@@ -204,7 +213,7 @@ class LearnedPolicy(TrainedPolicy):
         config = json.loads(cp.read_text()) if cp.exists() else {}
         algos: dict[str, Any] = {"ppo": PPO, "sac": SAC}
         algo = algos[str(config.get("algo", "ppo"))]
-        model = algo.load(str(zp), device="cpu")
+        model = algo.load(str(zp), device="cpu", custom_objects=_INFERENCE_ONLY)
         vecnorm = None
         if vp.exists():
             with open(vp, "rb") as fh:

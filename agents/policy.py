@@ -42,15 +42,6 @@ Array = NDArray[np.float64]
 POLICY_DIR = Path(__file__).resolve().parent / "pretrained"
 
 
-def _zero(_: float) -> float:
-    return 0.0
-
-
-#: What a saved model's training schedules load as: acting needs none, so they are not unpickled (as in RL Zoo's
-#: enjoy script), whatever the trainer made them of.
-_INFERENCE_ONLY: dict[str, Any] = {"learning_rate": 0.0, "lr_schedule": _zero, "clip_range": _zero}
-
-
 def _engine_of(env: Any) -> Engine:
     if isinstance(env, Engine):
         return env
@@ -206,6 +197,7 @@ class LearnedPolicy(TrainedPolicy):
     def load(cls, path: str | Path, engine: Engine | Any | None = None) -> LearnedPolicy:
         """Load the model at ``path`` (.zip) and the statistics and config beside it."""
         from stable_baselines3 import PPO, SAC
+        from stable_baselines3.common.utils import ConstantSchedule
 
         zp, vp, cp = cls.paths(path)
         if not zp.exists():
@@ -213,7 +205,10 @@ class LearnedPolicy(TrainedPolicy):
         config = json.loads(cp.read_text()) if cp.exists() else {}
         algos: dict[str, Any] = {"ppo": PPO, "sac": SAC}
         algo = algos[str(config.get("algo", "ppo"))]
-        model = algo.load(str(zp), device="cpu", custom_objects=_INFERENCE_ONLY)
+        # Acting needs no training schedule: they are not unpickled, whatever the trainer made them of (RL Zoo's way).
+        zero = ConstantSchedule(0.0)
+        model = algo.load(str(zp), device="cpu", custom_objects={"learning_rate": 0.0, "lr_schedule": zero,
+                                                                 "clip_range": zero})  # fmt: skip
         vecnorm = None
         if vp.exists():
             with open(vp, "rb") as fh:

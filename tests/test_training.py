@@ -252,64 +252,6 @@ def test_hold_turn_route_goes_round_the_centroid() -> None:
         Engine("hold", route="turn", framework="bipyramid_3d")
 
 
-def _visibility_shortest_path(p, g, centre, big, m=720):
-    """Shortest path from p to g round one disc (centre, radius big) in 2D, independently of the env: Dijkstra
-    over p, g and the vertices of a circumscribed m-gon, joined where the segment keeps out of the disc."""
-    from scipy.sparse.csgraph import dijkstra
-
-    ang = np.linspace(0.0, 2 * np.pi, m, endpoint=False)
-    ring = centre + big / np.cos(np.pi / m) * np.stack([np.cos(ang), np.sin(ang)], -1)
-    nodes = np.vstack([p, g, ring])
-    a, b = nodes[:, None], nodes[None, :]
-    ab = b - a
-    t = np.clip(np.einsum("ijk,ijk->ij", centre - a, ab) / np.maximum(np.einsum("ijk,ijk->ij", ab, ab), 1e-300), 0, 1)
-    clear = np.linalg.norm(a + t[..., None] * ab - centre, axis=-1) >= big * (1 - 1e-9)
-    length = np.linalg.norm(ab, axis=-1)
-    return dijkstra(np.where(clear, length, 0.0), indices=0)[1]
-
-
-def test_obstacle_field_around_route_is_the_shortest_path_round_a_disc() -> None:
-    """``ObstacleField(route="around")``: straight where the segment misses every (grown) obstacle, the shortest
-    path round a disc in the way (a visibility-graph oracle), continuous as the segment clears it, the same for a
-    sphere in 3D; any other route is refused."""
-    from formation_env.core.errors import FormationError
-    from formation_env.env.scenarios.obstacle_field import ROUTE_MARGIN
-
-    eng = Engine("obstacle_field", route="around")
-    rad = eng.agent_radius
-    big = 0.5 + rad + ROUTE_MARGIN
-    far = np.array([[20.0, 20.0, 0.3]])  # an obstacle nowhere near
-
-    def route(pos, goal, pvec, row=eng.scenario.route_row):
-        return route_lengths(row, np.asarray(pvec, float).reshape(1, -1), rad, np.array([pos]), np.array([goal]))[0]
-
-    pos, goal = np.array([[-3.0, 0.2], [-3.0, 2.0]]), np.array([[2.5, -0.4], [3.0, 2.5]])
-    disc = np.array([[0.0, 0.0, 0.5]])
-    d = route(pos, goal, np.vstack([disc, far]))
-    np.testing.assert_allclose(d[1], np.linalg.norm(goal[1] - pos[1]))  # misses the disc
-    np.testing.assert_allclose(d[0], _visibility_shortest_path(pos[0], goal[0], disc[0, :2], big), rtol=1e-4)
-    assert d[0] > np.linalg.norm(goal[0] - pos[0]) + 0.1
-    lateral = np.linspace(0.0, 1.5, 301)
-    lengths = np.array([route(np.array([[-3.0, y]]), np.array([[3.0, y]]), disc)[0] for y in lateral])
-    assert np.all(np.diff(lengths) <= 1e-12) and np.max(np.abs(np.diff(lengths))) < 0.01  # falls smoothly to 6
-    np.testing.assert_allclose(lengths[lateral >= big], 6.0)
-    np.testing.assert_allclose(route(pos, goal, far), np.linalg.norm(goal - pos, axis=-1))
-    straight = route(pos, goal, disc, Engine("obstacle_field").scenario.route_row)
-    np.testing.assert_allclose(straight, np.linalg.norm(goal - pos, axis=-1))
-    eng3 = Engine("obstacle_field", route="around", framework="bipyramid_3d")
-    pos3, goal3 = np.array([[-3.0, 0.2, 0.0]]), np.array([[2.5, -0.4, 0.0]])
-    d3 = route_lengths(
-        eng3.scenario.route_row, np.array([[0.0, 0.0, 0.0, 0.5]]), eng3.agent_radius, pos3[None], goal3[None]
-    )
-    np.testing.assert_allclose(
-        d3[0, 0],
-        _visibility_shortest_path(pos[0], goal[0], disc[0, :2], 0.5 + eng3.agent_radius + ROUTE_MARGIN),
-        rtol=1e-4,
-    )
-    with pytest.raises(FormationError, match="route must be 'straight' or 'around'"):
-        Engine("obstacle_field", route="turn")
-
-
 def test_hold_rotations_times_each_collision_and_its_rotation() -> None:
     from train.hold_rotations import collision_times, rotations
 

@@ -10,59 +10,20 @@ Per episode (uniform draws; ranges are keyword arguments):
 
 Gaps between obstacles are often narrower than the nominal formation: rotating, shearing or scaling it helps.
 Contact: an agent's path within ``agent_radius`` of an obstacle. Success (and its end) as in ``narrow_passage``.
-
-``route="around"`` makes the ``approach`` reward's route go round the obstacles instead of through them
-(:func:`around_route`), so that stepping aside of a disc in the way earns reward instead of costing it.
 """
 
 from __future__ import annotations
 
-import math
 from typing import Any, ClassVar
 
 import numpy as np
 
 from formation_env.core.errors import FormationError
 
-from .._numba import jit
-from ..kernel import straight_route
 from ..obstacles import Circle
 from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
 
-__all__ = ["ROUTE_MARGIN", "ObstacleField", "around_route"]
-
-#: Room (m) the ``approach`` reward's route keeps between an agent's disc and an obstacle.
-ROUTE_MARGIN = 0.05
-
-
-@jit
-def around_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
-    """``route="around"``: the straight length |g_i - p_i| plus, for each obstacle (centre c, radius rho
-    grown by the agent's radius and ``ROUTE_MARGIN`` to R) that the segment cuts, the detour of the shortest
-    path round it alone: tangent, arc, tangent, t_p + t_g + R (phi - a_p - a_g) with t = sqrt(|. - c|^2 - R^2),
-    a = acos(R / |. - c|) and phi the angle between p - c and g - c (exact for one obstacle; the detours of
-    overlapping ones add up). Continuous: the detour is 0 where the segment touches the grown obstacle.
-    pvec = (centre (d), radius) per obstacle, pos, goal (n, d) -> out (n,), m."""
-    d = pos.shape[1]
-    for i in range(pos.shape[0]):
-        dd = 0.0
-        for k in range(d):
-            dd += (goal[i, k] - pos[i, k]) ** 2
-        straight = math.sqrt(dd)
-        total = straight
-        for o in range(pvec.shape[0] // (d + 1)):
-            lo = o * (d + 1)
-            big = pvec[lo + d] + radius + ROUTE_MARGIN
-            pp = gg = pg = 0.0
-            for k in range(d):
-                u, v = pos[i, k] - pvec[lo + k], goal[i, k] - pvec[lo + k]
-                pp, gg, pg = pp + u * u, gg + v * v, pg + u * v
-            rp, rg = max(math.sqrt(pp), big), max(math.sqrt(gg), big)
-            phi = math.acos(min(max(pg / max(math.sqrt(pp * gg), 1e-12), -1.0), 1.0))
-            arc = phi - math.acos(big / rp) - math.acos(big / rg)
-            if arc > 0.0:
-                total += math.sqrt(rp * rp - big * big) + math.sqrt(rg * rg - big * big) + big * arc - straight
-        out[i] = total
+__all__ = ["ObstacleField"]
 
 
 class ObstacleField(Scenario):
@@ -87,14 +48,6 @@ class ObstacleField(Scenario):
         self.goal_x = check_range("goal_x", kw.pop("goal_x", (4.0, 4.5)))
         self.lateral = check_range("lateral", kw.pop("lateral", (-1.5, 1.5)))
         self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
-        self.route = kw.pop("route", "straight")
-        if self.route not in ("straight", "around"):
-            raise FormationError(f"obstacle_field: route must be 'straight' or 'around', got {self.route!r}")
-
-    @property
-    def route_row(self) -> Any:
-        """The ``approach`` potential's route: :func:`around_route` for ``route="around"``, else straight."""
-        return around_route if self.route == "around" else straight_route
 
     def draws(self) -> list[Draw]:
         d, c = self.d, self.n_obstacles

@@ -159,7 +159,8 @@ class TrainedPolicy(Policy):
         """The engine it acts in (built from the config's scenario and env arguments when not given)."""
         if self._engine is None:
             cfg = self.config
-            self._engine = Engine(str(cfg.get("scenario", "narrow_passage")), **cfg.get("env_kwargs", {}))
+            kw = {k: v for k, v in cfg.get("env_kwargs", {}).items() if k != "maneuver_kwargs"}  # not the engine's
+            self._engine = Engine(str(cfg.get("scenario", "narrow_passage")), **kw)
         return self._engine
 
 
@@ -170,7 +171,8 @@ class LearnedPolicy(TrainedPolicy):
     ``config["mode"]``: ``"commander"`` (observation = global state, action = all leaders, (n_l p,))
     or ``"shared"`` (one policy per leader on its own observation, action (p,)). A commander trained with
     ``config["action_mode"] = "maneuver"`` commands pose rates (:mod:`formation_env.env.maneuver`): the
-    commanded poses are its memory, started afresh for every episode at its first sample (k = 0).
+    commanded poses are its memory, started afresh for every episode at its first sample (k = 0), with the
+    rates of ``config["env_kwargs"]["maneuver_kwargs"]`` (the training's; the defaults when absent).
     """
 
     def __init__(self, model: Any, vecnorm: Any | None, config: dict[str, Any], engine: Engine | None = None) -> None:
@@ -252,7 +254,8 @@ class LearnedPolicy(TrainedPolicy):
         """Leader actions (B, n_l, p) of a pose-rate commander: its poses advance by its action on the global
         state and the commanded pose; episodes at k = 0 start a fresh pose."""
         if self._command is None or self._command.engine is not engine:
-            self._command, self._pose = PoseCommand(engine), None
+            rates = self.config.get("env_kwargs", {}).get("maneuver_kwargs", {})  # the training's pose rates
+            self._command, self._pose = PoseCommand(engine, **rates), None
         fresh = np.flatnonzero(state.k == 0)
         if self._pose is None or self._pose.b.shape[0] != state.batch_size:
             self._pose = self._command.reset(state)

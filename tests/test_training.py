@@ -163,6 +163,14 @@ def test_tolerance_reward_term_pays_while_the_success_test_holds() -> None:
     np.testing.assert_allclose(r_start, 0.0)
 
 
+def test_time_term_costs_each_second_until_the_episode_ends() -> None:
+    off = {"progress": 0, "formation": 0, "effort": 0, "distance": 0, "collision": 0, "success": 0}
+    eng = Engine("hold", reward_weights={**off, "time": 2.0})
+    s = eng.reset(np.random.default_rng(0), 2)
+    _, _, r, *_ = eng.step(s, np.random.default_rng(1).uniform(-1, 1, (2, eng.n_l, eng.p)))
+    np.testing.assert_allclose(r, -2.0 * eng.dt)
+
+
 def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -> None:
     """Summed over steps it telescopes to the agents' mean of log(eps + s_start) - log(eps + s_end)."""
     from oracle import phase_distance
@@ -180,6 +188,27 @@ def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -
     np.testing.assert_allclose(total, np.broadcast_to(expect.mean(axis=1, keepdims=True), total.shape), rtol=1e-9)
     at_rest_on_goal = s0._replace(pos=s0.goal, vel=np.zeros_like(s0.vel))
     np.testing.assert_allclose(phase_distance(eng, at_rest_on_goal), 0.0)
+
+
+def test_arrival_term_pays_the_approach_potential_left_on_a_success_that_ends_the_episode() -> None:
+    from oracle import phase_distance
+
+    from formation_env.env.rewards import EPS_APPROACH
+
+    off = {"progress": 0, "formation": 0, "effort": 0, "distance": 0, "collision": 0, "success": 0}
+    eng = Engine("hold", reward_weights={**off, "arrival": 2.0})
+    s = eng.reset(np.random.default_rng(0), 1)
+    near = s.goal + 0.05  # every agent 7 cm off its goal, the formation's shape exact
+    x = near @ np.linalg.pinv(eng.dynamics.C).T
+    zero = np.zeros((1, eng.n_l, eng.p))
+    last = s._replace(x=x, pos=near, err=np.zeros(1), streak=np.full(1, eng.scenario.hold_steps - 1))
+    new, _, r, term, _, info = eng.step(last, zero)
+    assert info["success"][0] and term[0]
+    expect = 2.0 * np.mean(np.log(EPS_APPROACH + phase_distance(eng, new)) - np.log(EPS_APPROACH))
+    assert expect > 2.0  # 7 cm off is worth paying for
+    np.testing.assert_allclose(r, expect, rtol=1e-9)
+    _, _, r_on, *_ = eng.step(s._replace(x=x, pos=near, err=np.zeros(1)), zero)  # at the goal, no success yet
+    np.testing.assert_allclose(r_on, 0.0)
 
 
 def test_route_progress_telescopes_to_each_leaders_route_length_gained() -> None:

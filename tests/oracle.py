@@ -170,7 +170,6 @@ def oracle_step(eng: Engine, state: EngineState, actions):
     rew = (
         w["progress"] * (gl0 - gl1)
         - w["distance"] * eng.dt * gl1
-        - w["time"] * eng.dt
         - w["formation"] * eng.dt * err[:, None]
         - w["effort"] * eng.dt * np.sum(a * a, axis=-1) / eng.p
         - w["collision"] * collision[:, None]

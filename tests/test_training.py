@@ -43,7 +43,9 @@ def test_smoke_train_save_load_evaluate(tmp_path: Path, mode: str) -> None:
 @pytest.mark.slow
 def test_maneuver_commander_trains_and_evaluates(tmp_path: Path) -> None:
     """A pose-rate commander: trained on the batched env, it acts through its own commanded poses."""
-    cfg = train("ppo", "commander", "hold", 512, seed=1, out=tmp_path, smoke=True, n_envs=2, action_mode="maneuver")
+    rates = {"pose_speed": 2.0, "rotation_rate": 1.5}
+    cfg = train("ppo", "commander", "hold", 512, seed=1, out=tmp_path, smoke=True, n_envs=2, action_mode="maneuver",
+                env_kwargs={"maneuver_kwargs": rates})  # fmt: skip
     assert cfg["action_mode"] == "maneuver"
     eng = Engine("hold")
     pol = load_policy(tmp_path / "hold_commander.zip", eng)
@@ -52,6 +54,8 @@ def test_maneuver_commander_trains_and_evaluates(tmp_path: Path) -> None:
     a = pol.act_engine(eng, state)
     assert a.shape == (3, eng.n_l, eng.p) and np.all(np.abs(a) <= 1.0)
     assert pol._pose is not None and pol._pose.b.shape == (3, eng.d)
+    assert pol._command is not None and pol._command.rates[[0, 2]].tolist() == [2.0, 1.5]  # the training's rates
+    assert pol.engine is eng and load_policy(tmp_path / "hold_commander.zip", None).engine.scenario_name == "hold"
 
 
 def test_maneuver_actions_only_for_commanders() -> None:
@@ -163,14 +167,6 @@ def test_tolerance_reward_term_pays_while_the_success_test_holds() -> None:
     np.testing.assert_allclose(r_start, 0.0)
 
 
-def test_time_term_costs_each_second_until_the_episode_ends() -> None:
-    off = {"progress": 0, "formation": 0, "effort": 0, "distance": 0, "collision": 0, "success": 0}
-    eng = Engine("hold", reward_weights={**off, "time": 2.0})
-    s = eng.reset(np.random.default_rng(0), 2)
-    _, _, r, *_ = eng.step(s, np.random.default_rng(1).uniform(-1, 1, (2, eng.n_l, eng.p)))
-    np.testing.assert_allclose(r, -2.0 * eng.dt)
-
-
 def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -> None:
     """Summed over steps it telescopes to the agents' mean of log(eps + s_start) - log(eps + s_end)."""
     from oracle import phase_distance
@@ -188,27 +184,6 @@ def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -
     np.testing.assert_allclose(total, np.broadcast_to(expect.mean(axis=1, keepdims=True), total.shape), rtol=1e-9)
     at_rest_on_goal = s0._replace(pos=s0.goal, vel=np.zeros_like(s0.vel))
     np.testing.assert_allclose(phase_distance(eng, at_rest_on_goal), 0.0)
-
-
-def test_arrival_term_pays_the_approach_potential_left_on_a_success_that_ends_the_episode() -> None:
-    from oracle import phase_distance
-
-    from formation_env.env.rewards import EPS_APPROACH
-
-    off = {"progress": 0, "formation": 0, "effort": 0, "distance": 0, "collision": 0, "success": 0}
-    eng = Engine("hold", reward_weights={**off, "arrival": 2.0})
-    s = eng.reset(np.random.default_rng(0), 1)
-    near = s.goal + 0.05  # every agent 7 cm off its goal, the formation's shape exact
-    x = near @ np.linalg.pinv(eng.dynamics.C).T
-    zero = np.zeros((1, eng.n_l, eng.p))
-    last = s._replace(x=x, pos=near, err=np.zeros(1), streak=np.full(1, eng.scenario.hold_steps - 1))
-    new, _, r, term, _, info = eng.step(last, zero)
-    assert info["success"][0] and term[0]
-    expect = 2.0 * np.mean(np.log(EPS_APPROACH + phase_distance(eng, new)) - np.log(EPS_APPROACH))
-    assert expect > 2.0  # 7 cm off is worth paying for
-    np.testing.assert_allclose(r, expect, rtol=1e-9)
-    _, _, r_on, *_ = eng.step(s._replace(x=x, pos=near, err=np.zeros(1)), zero)  # at the goal, no success yet
-    np.testing.assert_allclose(r_on, 0.0)
 
 
 def test_route_progress_telescopes_to_each_leaders_route_length_gained() -> None:
@@ -290,6 +265,20 @@ def test_hold_rotations_times_each_collision_and_its_rotation() -> None:
     assert np.all((when > 0) & (when <= eng.max_cycles * eng.dt))
     angle = rotations(eng, seeds)
     assert angle.shape == (4,) and np.all((angle >= 0) & (angle <= 180)) and np.ptp(angle) > 1
+
+
+def test_approach_profile_follows_the_team_to_its_goal(capsys: pytest.CaptureFixture[str]) -> None:
+    from train.approach_profile import main, profile
+
+    eng = Engine("hold")
+    rows = profile(eng, "analytic", [0, 1, 2], every=1.0, horizon=6.0)
+    assert rows.shape == (6, 3) and rows[:, 0].tolist() == pytest.approx([1, 2, 3, 4, 5, 6])
+    assert rows[0, 1] > 1.0 > 0.15 > rows[-1, 1] and rows[0, 2] > 0.5  # moving at first, within goal_tol at the end
+    assert np.all(np.diff(rows[:, 1]) <= 1e-9)  # the planner never backs off
+    main(["--policy", "analytic", "--episodes", "2", "--every", "2", "--horizon", "4"])
+    assert capsys.readouterr().out.count("\n") == 4  # header, rule, rows at 2 s and 4 s
+    with pytest.raises(SystemExit):
+        main(["--policy", "analytic", "--every", "0"])
 
 
 def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:

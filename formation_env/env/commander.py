@@ -67,8 +67,7 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
     ``gym.make("formation_env/FormationCommander-v0", scenario="narrow_passage",
     action_mode="leaders", render_mode=None, **kwargs)`` with the keyword arguments of
     ``formation_v0.parallel_env`` and, for ``maneuver`` only, ``pose_speed`` (1.0), ``scale_rate`` (0.5),
-    ``rotation_rate`` (0.5), ``shear_rate`` (0.5), ``scale_range`` ((0.2, 2.0)), ``kp`` (2.0, the leaders'
-    tracking gain) (None: the default).
+    ``rotation_rate`` (0.5), ``shear_rate`` (0.5), ``scale_range`` ((0.2, 2.0)) (None: the default).
 
     ## Version History
 
@@ -88,14 +87,13 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
         rotation_rate: float | None = None,
         shear_rate: float | None = None,
         scale_range: tuple[float, float] | None = None,
-        kp: float | None = None,
         **kwargs: Any,
     ) -> None:
         if action_mode not in ACTION_MODES:
             raise FormationError(f"action_mode must be one of {list(ACTION_MODES)}, got {action_mode!r}")
         self._check_render_mode(render_mode)
         given: dict[str, Any] = {"pose_speed": pose_speed, "scale_rate": scale_rate, "rotation_rate": rotation_rate,
-                                 "shear_rate": shear_rate, "scale_range": scale_range, "kp": kp}  # fmt: skip
+                                 "shear_rate": shear_rate, "scale_range": scale_range}  # fmt: skip
         pose_kwargs = {key: val for key, val in given.items() if val is not None}
         if pose_kwargs and action_mode != "maneuver":
             raise TypeError(f"{', '.join(pose_kwargs)} apply to action_mode='maneuver' only, not to {action_mode!r}")

@@ -60,8 +60,6 @@ class PoseCommand:
         engine: the :class:`~formation_env.env.engine.Engine` whose leaders track the pose.
         pose_speed: m/s of b_c at action 1. scale_rate: 1/s of log s. rotation_rate: rad/s. shear_rate: 1/s.
         scale_range: (lo, hi) of every scale, 0 < lo < 1 < hi.
-        kp: the leaders' tracking gain (:func:`~formation_env.env.control.track_targets`; 1/s^2 for double
-            integrators, 1/s for single ones).
     """
 
     def __init__(
@@ -73,10 +71,8 @@ class PoseCommand:
         rotation_rate: float = 0.5,
         shear_rate: float = 0.5,
         scale_range: tuple[float, float] = (0.2, 2.0),
-        kp: float = 2.0,
     ) -> None:
         self.engine = engine
-        self.kp = check_real_scalar(kp, "kp", low=0.0)
         rates = {"pose_speed": pose_speed, "scale_rate": scale_rate, "rotation_rate": rotation_rate,
                  "shear_rate": shear_rate}  # fmt: skip
         self.rates = np.array([check_real_scalar(v, k, low=0.0) for k, v in rates.items()], dtype=np.float64)
@@ -132,7 +128,7 @@ class PoseCommand:
         before = affine_batch(rl, pose.theta(), pose.b)
         new = self.advance(pose, a)
         after = affine_batch(rl, new.theta(), new.b)
-        return new, track_targets(eng, state, after, (after - before) / eng.dt, kp=self.kp)
+        return new, track_targets(eng, state, after, (after - before) / eng.dt)
 
     def observe(self, pose: Pose) -> Array:
         """Theta_c (row-major) and b_c of every environment, (B, d^2 + d), clipped to ``obs_low``/``obs_high``."""

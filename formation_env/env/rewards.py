@@ -19,7 +19,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._numba import jit
-from .kernel import FLAG_AT_GOAL, FLAG_COLLISION, FLAG_SUCCESS, FLAG_TERMINATED
+from .kernel import FLAG_AT_GOAL, FLAG_COLLISION, FLAG_SUCCESS
 
 Array = NDArray[np.float64]
 Bools = NDArray[np.bool_]
@@ -81,24 +81,9 @@ def _distance(b: int, out: Array, w: float, dt: float, gdist: Array) -> None:  #
         out[i] -= w * dt * gdist[b, i]
 
 
-@reward_term("time", 0.0, "-T: a cost of time, per second until the episode ends (s; a minimum-time task)")
-def _time(b: int, out: Array, w: float, dt: float) -> None:  # pragma: no cover
-    for i in range(out.shape[0]):
-        out[i] -= w * dt
-
-
 #: Scales of the ``approach`` term: velocity errors weigh as position errors TAU_APPROACH s long, and the
 #: log's floor EPS_APPROACH (m) is the distance below which further approach earns little more.
 TAU_APPROACH, EPS_APPROACH = 1.0, 0.02
-
-
-@jit
-def _log_phase(b: int, i: int, vel: Array, gvel: Array, route: Array) -> float:  # pragma: no cover
-    """log(eps + s_i) of agent i of env b: s_i its phase-space distance to its goal state (the ``approach`` term)."""
-    v = 0.0
-    for k in range(vel.shape[2]):
-        v += (vel[b, i, k] - gvel[b, i, k]) ** 2
-    return math.log(EPS_APPROACH + math.sqrt(route[b, i] ** 2 + TAU_APPROACH**2 * v))
 
 
 @reward_term(
@@ -113,31 +98,18 @@ def _log_phase(b: int, i: int, vel: Array, gvel: Array, route: Array) -> float: 
 def _approach(  # pragma: no cover
     b: int, out: Array, w: float, vel0: Array, gvel0: Array, vel: Array, gvel: Array, route0: Array, route1: Array
 ) -> None:
-    n = vel.shape[1]
+    n, d = vel.shape[1], vel.shape[2]
     acc = 0.0
     for i in range(n):
-        acc += _log_phase(b, i, vel0, gvel0, route0) - _log_phase(b, i, vel, gvel, route1)
+        v0 = v1 = 0.0
+        for k in range(d):
+            v0 += (vel0[b, i, k] - gvel0[b, i, k]) ** 2
+            v1 += (vel[b, i, k] - gvel[b, i, k]) ** 2
+        p0 = math.sqrt(route0[b, i] ** 2 + TAU_APPROACH**2 * v0)
+        p1 = math.sqrt(route1[b, i] ** 2 + TAU_APPROACH**2 * v1)
+        acc += math.log(EPS_APPROACH + p0) - math.log(EPS_APPROACH + p1)
     for i in range(out.shape[0]):
         out[i] += w * acc / n
-
-
-@reward_term(
-    "arrival",
-    0.0,
-    "on a success that ends the episode, the ``approach`` potential left: mean over all agents of "
-    "log(eps + s_i(k+1)) - log(eps), as if the team had come to rest on its goal (weight it as ``approach``, "
-    "so that the shaping no longer pays for creeping closer before the success test ends the episode)",
-)
-def _arrival(  # pragma: no cover
-    b: int, out: Array, w: float, flags: Bools, vel: Array, gvel: Array, route1: Array
-) -> None:
-    if flags[b, FLAG_SUCCESS] and flags[b, FLAG_TERMINATED]:
-        n = vel.shape[1]
-        acc = 0.0
-        for i in range(n):
-            acc += _log_phase(b, i, vel, gvel, route1) - math.log(EPS_APPROACH)
-        for i in range(out.shape[0]):
-            out[i] += w * acc / n
 
 
 @reward_term("formation", 1.0, "-T e(k+1): the affine-image formation error, per second (m s)")
@@ -201,7 +173,7 @@ def _tolerance(b: int, out: Array, w: float, dt: float, flags: Bools) -> None:  
 #: Names of the registered terms, in order.
 REWARD_TERMS: tuple[str, ...] = tuple(TERMS)
 #: The terms that read the route lengths of the scenario's ``route_row`` (``route0``, ``route1``).
-ROUTE_TERMS: tuple[str, ...] = ("approach", "arrival", "route_progress")
+ROUTE_TERMS: tuple[str, ...] = ("approach", "route_progress")
 #: Default weights of the registered terms.
 DEFAULT_WEIGHTS: dict[str, float] = {t.name: t.weight for t in TERMS.values()}
 

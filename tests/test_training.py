@@ -320,6 +320,10 @@ def test_linear_schedule_strings_become_schedules_and_others_are_refused() -> No
     assert isinstance(lr, LinearSchedule)
     assert lr(1.0) == pytest.approx(3e-4) and lr(0.25) == pytest.approx(7.5e-5) and lr(0.0) == 0.0
     assert hp["clip_range"] == 0.2 and hp["n_steps"] == 256
-    for bad in ("exp_3e-4", "lin_fast", "3e-4"):
+    held = schedules({"learning_rate": "lin_3e-4_from_0.6"})["learning_rate"]
+    assert held(1.0) == held(0.4) == 3e-4  # constant, bit for bit, over the first 60 % of training
+    assert held(0.2) == pytest.approx(1.5e-4) and held(0.0) == 0.0
+    assert all(schedules({"lr": "lin_3e-4_from_0"})["lr"](r) == lr(r) for r in np.linspace(0.0, 1.0, 101))
+    for bad in ("exp_3e-4", "lin_fast", "3e-4", "lin_3e-4_from_1", "lin_3e-4_from_-0.1", "lin_3e-4_0.5"):
         with pytest.raises(ValueError, match="learning_rate"):
             schedules({"learning_rate": bad})

@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import re
 import shlex
 import sys
 import time
@@ -100,27 +101,42 @@ def load_config(path: str | Path) -> dict[str, Any]:
 class LinearSchedule:
     """A value shrinking linearly to 0 over training (``"lin_<value>"`` in a recipe, as in RL Zoo): SB3 calls it with
     the fraction of training left, 1 at the start and 0 at the end. SB3's own ``LinearSchedule(value, 0, 1)`` equals
-    it only to rounding (a third of the updates differ in the last bit); this form trained the shipped policies."""
+    it only to rounding (a third of the updates differ in the last bit); this form trained the shipped policies.
 
-    def __init__(self, initial: float) -> None:
+    ``start`` (``"lin_<value>_from_<start>"``) holds the value constant over that fraction of training first and
+    shrinks it linearly to 0 over the rest; ``start`` 0 is the plain linear schedule, bit for bit."""
+
+    start: float = 0.0  # class default: models saved before ``start`` existed load unchanged
+
+    def __init__(self, initial: float, start: float = 0.0) -> None:
+        if not 0.0 <= start < 1.0:
+            raise ValueError(f"start: the fraction of training before the decay must be in [0, 1), got {start}")
         self.initial = float(initial)
+        self.start = float(start)
 
     def __call__(self, remaining: float) -> float:
-        return remaining * self.initial
+        return min(1.0, remaining / (1.0 - self.start)) * self.initial
+
+
+_SCHEDULE = re.compile(r"lin_(?P<initial>[^_]+)(_from_(?P<start>[^_]+))?")
 
 
 def schedules(hp: dict[str, Any]) -> dict[str, Any]:
-    """``hp`` with every ``"lin_<value>"`` string (e.g. ``learning_rate: lin_3e-4``) as a :class:`LinearSchedule`;
-    another string raises ValueError naming the key."""
+    """``hp`` with every ``"lin_<value>"`` or ``"lin_<value>_from_<start>"`` string (e.g. ``learning_rate: lin_3e-4``)
+    as a :class:`LinearSchedule`; another string raises ValueError naming the key."""
     out = dict(hp)
     for key, val in hp.items():
         if isinstance(val, str):
+            match = _SCHEDULE.fullmatch(val)
             try:
-                out[key] = LinearSchedule(float(val[4:] if val.startswith("lin_") else ""))  # float("") raises
+                if match is None:
+                    raise ValueError
+                out[key] = LinearSchedule(float(match["initial"]), float(match["start"] or 0.0))
             except ValueError:
                 raise ValueError(
-                    f"algo_kwargs[{key!r}]: a string must be 'lin_<number>' (linear to 0), got {val!r} (YAML "
-                    "reads 3e-4 as a string: write 3.0e-4)"
+                    f"algo_kwargs[{key!r}]: a string must be 'lin_<number>' (linear to 0) or 'lin_<number>_from_<f>' "
+                    f"(constant over the fraction f of training in [0, 1), then linear to 0), got {val!r} (YAML reads "
+                    "3e-4 as a string: write 3.0e-4)"
                 ) from None
     return out
 

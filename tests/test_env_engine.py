@@ -7,6 +7,7 @@ import pickle
 import warnings
 from pathlib import Path
 
+import numba
 import numpy as np
 import pytest
 from conftest import random_framework
@@ -130,6 +131,29 @@ def test_batch_equals_per_env_loop(scenario):
             assert tb[b] == t1[0]
             for key in ib:
                 np.testing.assert_allclose(ib[key][b], i1[key][0], atol=1e-10)
+
+
+@pytest.mark.skipif(numba.config.NUMBA_NUM_THREADS < 2, reason="numba has one thread: no threaded kernel to compare")
+def test_threaded_step_equals_the_one_thread_step():
+    """From PARALLEL_FROM rows the step runs on numba's threads unless numba has one (what a trainer sets): the
+    same rows give the same outputs bit for bit either way."""
+    from formation_env.env.engine import PARALLEL_FROM
+
+    eng = Engine("narrow_passage")
+    B = PARALLEL_FROM
+    a = np.random.default_rng(9).uniform(-1, 1, (B, eng.n_l, eng.p))
+    outs = []
+    for threads in (numba.config.NUMBA_NUM_THREADS, 1):
+        numba.set_num_threads(threads)
+        try:
+            s = eng.reset(np.random.default_rng(3), B)
+            for _ in range(20):
+                s, obs, rew, term, trunc, _ = eng.step(s, a)
+            outs.append((s.pos, obs, rew, term, trunc))
+        finally:
+            numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+    for threaded, single in zip(*outs, strict=True):
+        np.testing.assert_array_equal(threaded, single)
 
 
 def test_step_is_pure():

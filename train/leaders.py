@@ -360,10 +360,14 @@ def train(
         central_critic: (shared PPO) the critic reads the global state too, the actor only the leader's own
             observation (MAPPO's split, :class:`agents.central_critic.LocalActorPolicy`).
     """
+    import numba
     import torch
     from stable_baselines3 import PPO, SAC
 
     torch.set_num_threads(1)
+    # One core per run: with numba's worker threads (the step's threaded kernel, from 64 envs on) competing with
+    # torch, a 64-env PPO run on the loaded 2-core machine took 15 times as long (225 s against 14.5 s for 65k steps).
+    numba.set_num_threads(1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     from formation_env.env.versions import with_version

@@ -18,6 +18,7 @@ import warnings
 from collections.abc import Sequence
 from typing import Any
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
@@ -66,7 +67,8 @@ Array = NDArray[np.float64]
 
 #: Above this many agents, agent-agent contacts are checked along the graph's edges only.
 ALL_PAIRS_UP_TO = 64
-#: From this batch size on, the compiled step runs its rows on numba's threads.
+#: From this batch size on, the compiled step runs its rows on numba's threads (when it has more than one:
+#: ``numba.set_num_threads(1)`` keeps the step on the calling thread, as a trainer sharing the core with torch wants).
 PARALLEL_FROM = 64
 #: Placeholders of the compiled step's optional inputs (no law state given, no observation noise).
 _NO_STATE = np.zeros((0, 0, 0))
@@ -477,7 +479,8 @@ class Engine:
             x1, law_mem = self.law.step(state.x, self.u_max * np.clip(a, -1.0, 1.0), state.memory)
             mem1 = _NO_STATE if law_mem is None else law_mem
         args = self._args(c, state, a, x1, mem1, self._noise(B, rng))
-        raw, obs, rew = (mod.step_parallel if B >= PARALLEL_FROM else mod.step)(*args)
+        threaded = B >= PARALLEL_FROM and numba.get_num_threads() > 1
+        raw, obs, rew = (mod.step_parallel if threaded else mod.step)(*args)
         out = Outputs._make(raw)
         f = out.flags
         mem = out.mem if state.memory is not None else None

@@ -365,8 +365,8 @@ def train(
     from stable_baselines3 import PPO, SAC
 
     torch.set_num_threads(1)
-    # One core per run: with numba's worker threads (the step's threaded kernel, from 64 envs on) competing with
-    # torch, a 64-env PPO run on the loaded 2-core machine took 15 times as long (225 s against 14.5 s for 65k steps).
+    # One core per run: numba's worker threads (the step's threaded kernel, from 64 envs on) compete with torch,
+    # and a run sharing the machine with others slows many times over.
     numba.set_num_threads(1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -143,6 +143,7 @@ def test_threaded_step_equals_the_one_thread_step():
     B = PARALLEL_FROM
     a = np.random.default_rng(9).uniform(-1, 1, (B, eng.n_l, eng.p))
     outs = []
+    before = numba.get_num_threads()  # a trainer test in this process may have set 1
     for threads in (numba.config.NUMBA_NUM_THREADS, 1):
         numba.set_num_threads(threads)
         try:
@@ -151,7 +152,7 @@ def test_threaded_step_equals_the_one_thread_step():
                 s, obs, rew, term, trunc, _ = eng.step(s, a)
             outs.append((s.pos, obs, rew, term, trunc))
         finally:
-            numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
+            numba.set_num_threads(before)
     for threaded, single in zip(*outs, strict=True):
         np.testing.assert_array_equal(threaded, single)
 

@@ -67,8 +67,7 @@ Array = NDArray[np.float64]
 
 #: Above this many agents, agent-agent contacts are checked along the graph's edges only.
 ALL_PAIRS_UP_TO = 64
-#: From this batch size on, the compiled step runs its rows on numba's threads (when it has more than one:
-#: ``numba.set_num_threads(1)`` keeps the step on the calling thread, as a trainer sharing the core with torch wants).
+#: From this batch size on, the compiled step runs its rows on numba's threads, if numba has more than one.
 PARALLEL_FROM = 64
 #: Placeholders of the compiled step's optional inputs (no law state given, no observation noise).
 _NO_STATE = np.zeros((0, 0, 0))

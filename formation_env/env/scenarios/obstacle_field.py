@@ -10,6 +10,13 @@ Per episode (uniform draws; ranges are keyword arguments):
 
 Gaps between obstacles are often narrower than the nominal formation: rotating, shearing or scaling it helps.
 Contact: an agent's path within ``agent_radius`` of an obstacle. Success (and its end) as in ``narrow_passage``.
+
+Task features (the optional ``task`` observation block, 2D, per leader, m). The discs' shadows on the y axis,
+[y_c - r, y_c + r], leave free lanes in the world's height, straight corridors along x that cross the field
+without meeting a disc. The block holds the field's near and far x (min x_c - r and max x_c + r) minus the
+leader's x, then, for each of the ``N_LANES`` widest lanes (widest first), its centre's y minus the formation's
+fitted b_y and the room left in it: half its width minus the team's half-height with the discs (negative: the
+formation must shrink to pass). A missing lane reads centre 0 and room -2 H (H the world's height).
 """
 
 from __future__ import annotations
@@ -20,10 +27,62 @@ import numpy as np
 
 from formation_env.core.errors import FormationError
 
+from numpy.typing import NDArray
+
+from .._numba import jit
 from ..obstacles import Circle
 from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
 
-__all__ = ["ObstacleField"]
+__all__ = ["N_LANES", "ObstacleField"]
+
+#: Lanes in the ``task`` block (the widest, widest first).
+N_LANES = 3
+
+
+@jit
+def task_row(  # pragma: no cover
+    b: int, out: Array, lo: int, leaders: NDArray[np.int64], pos: Array, pvec: Array, bfit: Array, radius: float,
+    bounds: Array,
+) -> None:  # fmt: skip
+    """The ``task`` block (the module docstring): field's near and far x minus x_i, then per lane of the
+    ``N_LANES`` widest its centre minus b_y and the room left (m). pvec = circles (C * 3,) as (x, y, r)."""
+    c = pvec.shape[1] // 3
+    lo_y, hi_y = np.inf, -np.inf
+    for j in range(pos.shape[1]):
+        lo_y, hi_y = min(lo_y, pos[b, j, 1]), max(hi_y, pos[b, j, 1])
+    half = 0.5 * (hi_y - lo_y) + radius
+    x_near, x_far = np.inf, -np.inf
+    shadow_lo, shadow_hi = np.empty(c), np.empty(c)
+    for j in range(c):
+        x, y, r = pvec[b, 3 * j], pvec[b, 3 * j + 1], pvec[b, 3 * j + 2]
+        x_near, x_far = min(x_near, x - r), max(x_far, x + r)
+        shadow_lo[j], shadow_hi[j] = y - r, y + r
+    if c == 0:
+        x_near = x_far = 0.0
+    # free lanes: the world's height minus the union of the shadows, swept bottom to top
+    lane_lo, lane_hi = np.empty(c + 1), np.empty(c + 1)
+    m, top = 0, bounds[0, 1]
+    for j in np.argsort(shadow_lo, kind="mergesort"):
+        if shadow_lo[j] > top:
+            lane_lo[m], lane_hi[m] = top, shadow_lo[j]
+            m += 1
+        top = max(top, shadow_hi[j])
+    if bounds[1, 1] > top:
+        lane_lo[m], lane_hi[m] = top, bounds[1, 1]
+        m += 1
+    order = np.argsort(lane_lo[:m] - lane_hi[:m], kind="mergesort")
+    no_room = -2.0 * (bounds[1, 1] - bounds[0, 1])
+    for i, a in enumerate(leaders):
+        out[i, lo] = x_near - pos[b, a, 0]
+        out[i, lo + 1] = x_far - pos[b, a, 0]
+        for q in range(N_LANES):
+            if q < m:
+                k = order[q]
+                out[i, lo + 2 + 2 * q] = 0.5 * (lane_lo[k] + lane_hi[k]) - bfit[b, 1]
+                out[i, lo + 3 + 2 * q] = 0.5 * (lane_hi[k] - lane_lo[k]) - half
+            else:
+                out[i, lo + 2 + 2 * q] = 0.0
+                out[i, lo + 3 + 2 * q] = no_room
 
 
 class ObstacleField(Scenario):
@@ -79,6 +138,17 @@ class ObstacleField(Scenario):
             "circles": circles,
         }
         return params, (self._rotation(raw["angle0"]), b0)
+
+    task_row = staticmethod(task_row)
+
+    def task_feature_bounds(self) -> tuple[Array, Array]:
+        if self.d != 2:
+            raise FormationError("obstacle_field: the task observation block is defined in 2D only")
+        ext = self.bounds[1] - self.bounds[0]
+        lane_lo, lane_hi = np.array([-ext[1], -2.0 * ext[1]]), np.array([ext[1], ext[1]])
+        lo = np.concatenate([-ext[[0, 0]], np.tile(lane_lo, N_LANES)])
+        hi = np.concatenate([ext[[0, 0]], np.tile(lane_hi, N_LANES)])
+        return lo, hi
 
     def param_vector(self, params: dict[str, Array]) -> Array:
         return params["circles"].reshape(params["circles"].shape[0], -1)

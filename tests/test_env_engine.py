@@ -522,7 +522,7 @@ def test_obstacle_field_task_block_matches_a_marched_grid():
     circles[2] = [[0.0, -3.0, 2.5], [0.0, 2.5, 2.55], [0, 0, 0.3], [0, 0, 0.3], [0, 0, 0.3], [0, 0, 0.3]]
     s.params["_pvec"] = np.ascontiguousarray(eng.scenario.param_vector({"circles": circles}))  # what the row reads
     obs = eng.observe(s)[..., eng.observer.slices["task"]].astype(float)
-    (lo_x, lo_y), (hi_x, hi_y) = eng.bounds
+    lo_y, hi_y = eng.bounds[:, 1]
     for b in range(4):
         c = circles[b]
         pos = s.pos[b]

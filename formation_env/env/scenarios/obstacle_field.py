@@ -24,10 +24,9 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from formation_env.core.errors import FormationError
-
-from numpy.typing import NDArray
 
 from .._numba import jit
 from ..obstacles import Circle

@@ -299,6 +299,17 @@ def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:
     assert eng.scenario.gap_width == final
     with pytest.raises(ValueError, match="not a"):
         RangeCurriculum(eng, {"nonsense": [1, 2]}, 0.5, 10)
+    late = RangeCurriculum(eng, {"gap_width": [2.4, 3.0]}, fraction=0.5, total=1000, begin=0.2)
+    for t, expect in ((0, (2.4, 3.0)), (200, (2.4, 3.0)), (350, (0.5 * (2.4 + final[0]), 0.5 * (3.0 + final[1])))):
+        late.num_timesteps = t
+        late._on_step()
+        assert eng.scenario.gap_width == pytest.approx(expect)
+    with pytest.raises(ValueError, match=r"begin must be in \[0, fraction\)"):
+        RangeCurriculum(eng, {"gap_width": [2.4, 3.0]}, fraction=0.5, total=1000, begin=0.5)
+    recipe = {"start": {"gap_width": [2.4, 3.0]}, "fraction": 0.5, "begin": 0.2}
+    assert RangeCurriculum.from_recipe(eng, recipe, 1000).first == 200
+    with pytest.raises(ValueError, match=r"give start, fraction and optionally begin, got \['fraction', 'strat'\]"):
+        RangeCurriculum.from_recipe(eng, {"strat": {}, "fraction": 0.5}, 1000)
 
 
 @pytest.mark.parametrize("flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum"])

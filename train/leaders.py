@@ -252,24 +252,37 @@ class ToleranceCurriculum(BaseCallback):
 
 class RangeCurriculum(BaseCallback):
     """A curriculum on a scenario's episode draws: each named range (e.g. ``gap_width``) starts at the given
-    (lo, hi) and moves linearly to the scenario's own over the first ``fraction`` of the training timesteps, in
-    the one engine of the ``FormationVecEnv``. Evaluation always uses the scenario's own ranges.
+    (lo, hi), stays there until ``begin`` of the training timesteps (a fraction, default 0) and moves linearly
+    to the scenario's own until ``fraction`` of them, in the one engine of the ``FormationVecEnv``. Evaluation
+    always uses the scenario's own ranges.
 
     The global state's and observations' bounds stay the scenario's own: a parameter drawn outside them is
     seen clipped.
     """
 
-    def __init__(self, engine: Any, start: dict[str, Sequence[float]], fraction: float, total: int) -> None:
+    def __init__(
+        self, engine: Any, start: dict[str, Sequence[float]], fraction: float, total: int, begin: float = 0.0
+    ) -> None:
         super().__init__()
         if not 0.0 < fraction <= 1.0:
             raise ValueError(f"range curriculum: fraction must be in (0, 1], got {fraction}")
+        if not 0.0 <= begin < fraction:
+            raise ValueError(f"range curriculum: begin must be in [0, fraction) = [0, {fraction}), got {begin}")
         self.scenario = sc = engine.scenario
         for key, rng in start.items():
             if not isinstance(getattr(sc, key, None), tuple) or len(rng) != 2:
                 raise ValueError(f"range curriculum: {key!r} is not a (lo, hi) range of {sc.name!r}")
         self.final = {k: tuple(getattr(sc, k)) for k in start}
         self.start = {k: (float(v[0]), float(v[1])) for k, v in start.items()}
-        self.span = max(1, int(fraction * total))
+        self.first = int(begin * total)
+        self.span = max(1, int(fraction * total) - self.first)
+
+    @classmethod
+    def from_recipe(cls, engine: Any, recipe: dict[str, Any], total: int) -> RangeCurriculum:
+        """From a recipe's ``range_curriculum`` mapping: ``start``, ``fraction`` and optionally ``begin``."""
+        if set(recipe) - {"start", "fraction", "begin"} or not {"start", "fraction"} <= set(recipe):
+            raise ValueError(f"range curriculum: give start, fraction and optionally begin, got {sorted(recipe)}")
+        return cls(engine, recipe["start"], float(recipe["fraction"]), total, float(recipe.get("begin", 0.0)))
 
     def _set(self, left: float) -> None:
         for k, (a0, a1) in self.start.items():
@@ -278,7 +291,7 @@ class RangeCurriculum(BaseCallback):
             self.scenario.__dict__.pop("_plan", None)  # the draws read the ranges when the plan is built
 
     def _on_step(self) -> bool:
-        self._set(max(0.0, 1.0 - self.num_timesteps / self.span))
+        self._set(min(1.0, max(0.0, 1.0 - (self.num_timesteps - self.first) / self.span)))
         return True
 
     def _on_training_end(self) -> None:
@@ -353,8 +366,9 @@ def train(
         algo_kwargs: the algorithm's hyperparameters over :data:`ALGO_DEFAULTS` (e.g. ``n_steps``, ``gamma``).
         policy_kwargs: SB3 ``policy_kwargs`` over :data:`POLICY_DEFAULTS` (e.g. ``net_arch``, ``log_std_init``).
         config_file: the recipe file these came from (recorded in the saved config).
-        range_curriculum: ``{"start": {range name: [lo, hi]}, "fraction": f}``: those episode draws start
-            at the given ranges and reach the scenario's own after ``f`` of the timesteps (:class:`RangeCurriculum`).
+        range_curriculum: ``{"start": {range name: [lo, hi]}, "fraction": f, "begin": b}``: those episode draws
+            start at the given ranges, stay there until ``b`` of the timesteps (optional, default 0) and reach the
+            scenario's own after ``f`` of them (:class:`RangeCurriculum`).
         env_version: the env version whose defaults ``env_kwargs`` sit over (:mod:`formation_env.env.versions`;
             1 is ``formation_v1``).
         central_critic: (shared PPO) the critic reads the global state too, the actor only the leader's own
@@ -422,8 +436,7 @@ def train(
     if curriculum is not None:
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:
-        start, fraction = range_curriculum["start"], float(range_curriculum["fraction"])
-        callbacks.append(RangeCurriculum(base.engine, start, fraction, int(timesteps)))
+        callbacks.append(RangeCurriculum.from_recipe(base.engine, range_curriculum, int(timesteps)))
     model.learn(int(timesteps), callback=CallbackList(callbacks), progress_bar=progress_bar, tb_log_name=name)
     wall = time.time() - t0
     stem = out / name

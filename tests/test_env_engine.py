@@ -541,3 +541,29 @@ def test_obstacle_field_task_block_matches_a_marched_grid():
             np.testing.assert_allclose(obs[b, i], want, atol=2e-4, err_msg=f"env {b}, leader {i}")
     with pytest.raises(FormationError, match="obstacle_field: the task observation block is defined in 2D only"):
         Engine("obstacle_field", framework="bipyramid_3d", observation=["position", "task"])
+
+
+def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
+    """The ``approach`` route of ``obstacle_field`` (2D): round a disc through the lane with the shorter
+    routes for the whole team, continuous where an agent enters the field, straight once past it."""
+    from formation_env.env.scenarios.obstacle_field import ROUTE_MARGIN, route_row
+
+    disc = np.array([0.0, 0.0, 1.0])  # one circle of radius 1 at the origin: lanes y < -1 and y > 1
+    room = 1.0 + 0.1 + ROUTE_MARGIN  # the disc centres' room: |y| >= room
+
+    def routes(ys, goal_ys=None, x=-4.0):
+        out = np.zeros(len(ys))
+        pos = np.stack([np.full(len(ys), x), ys], -1)
+        route_row(disc, 0.1, pos, np.stack([np.full(len(ys), 4.0), ys if goal_ys is None else goal_ys], -1), out)
+        return out
+
+    def via(dy):  # 3 m to the field, 2 m across, 3 m to the goal, offset dy to the room's edge
+        return 2 * np.hypot(3.0, dy) + 2.0
+
+    np.testing.assert_allclose(routes(np.array([0.0, 0.3])), [via(room), via(room - 0.3)])  # above
+    np.testing.assert_allclose(routes(np.array([-0.5, 0.3])), [via(room - 0.5), via(room + 0.3)])  # below
+    for ys in ([2.0], [0.0]):  # entering the field, on and off the lane
+        before, inside = routes(np.array(ys), x=-1.0 - 1e-9)[0], routes(np.array(ys), x=-1.0 + 1e-9)[0]
+        assert before == pytest.approx(inside, abs=1e-6)
+    assert routes(np.array([2.0]), x=-1.0)[0] == pytest.approx(5.0)
+    assert routes(np.array([0.0]), x=1.5)[0] == pytest.approx(2.5)  # past the field: straight

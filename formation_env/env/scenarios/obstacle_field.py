@@ -21,6 +21,7 @@ formation must shrink to pass). A missing lane reads centre 0 and room -2 H (H t
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -29,13 +30,44 @@ from numpy.typing import NDArray
 from formation_env.core.errors import FormationError
 
 from .._numba import jit
+from ..kernel import straight_route
 from ..obstacles import Circle
 from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
 
-__all__ = ["N_LANES", "ObstacleField"]
+__all__ = ["N_LANES", "ROUTE_MARGIN", "ObstacleField"]
 
 #: Lanes in the ``task`` block (the widest, widest first).
 N_LANES = 3
+
+
+#: Room (m) the ``approach`` reward's route keeps between an agent's disc and a lane's edges.
+ROUTE_MARGIN = 0.05
+
+
+@jit
+def field_lanes(circles: Array, y_lo: float, y_hi: float) -> tuple[float, float, Array, Array]:  # pragma: no cover
+    """The field of circles (C * 3,) as (x, y, r): its near and far x (min x - r, max x + r; 0 without
+    circles) and its free lanes in [y_lo, y_hi], the parts outside every circle's shadow [y - r, y + r]
+    (m), as (lane_lo, lane_hi) (m,) each, widest first."""
+    c = circles.shape[0] // 3
+    x_near, x_far = (np.inf, -np.inf) if c else (0.0, 0.0)
+    shadow_lo, shadow_hi = np.empty(c), np.empty(c)
+    for j in range(c):
+        x, y, r = circles[3 * j], circles[3 * j + 1], circles[3 * j + 2]
+        x_near, x_far = min(x_near, x - r), max(x_far, x + r)
+        shadow_lo[j], shadow_hi[j] = y - r, y + r
+    lane_lo, lane_hi = np.empty(c + 1), np.empty(c + 1)
+    m, top = 0, y_lo  # swept bottom to top
+    for j in np.argsort(shadow_lo, kind="mergesort"):
+        if shadow_lo[j] > top:
+            lane_lo[m], lane_hi[m] = top, shadow_lo[j]
+            m += 1
+        top = max(top, shadow_hi[j])
+    if y_hi > top:
+        lane_lo[m], lane_hi[m] = top, y_hi
+        m += 1
+    order = np.argsort(lane_lo[:m] - lane_hi[:m], kind="mergesort")
+    return x_near, x_far, lane_lo[order], lane_hi[order]
 
 
 @jit
@@ -45,43 +77,58 @@ def task_row(  # pragma: no cover
 ) -> None:  # fmt: skip
     """The ``task`` block (the module docstring): field's near and far x minus x_i, then per lane of the
     ``N_LANES`` widest its centre minus b_y and the room left (m). pvec = circles (C * 3,) as (x, y, r)."""
-    c = pvec.shape[1] // 3
     lo_y, hi_y = np.inf, -np.inf
     for j in range(pos.shape[1]):
         lo_y, hi_y = min(lo_y, pos[b, j, 1]), max(hi_y, pos[b, j, 1])
     half = 0.5 * (hi_y - lo_y) + radius
-    x_near, x_far = np.inf, -np.inf
-    shadow_lo, shadow_hi = np.empty(c), np.empty(c)
-    for j in range(c):
-        x, y, r = pvec[b, 3 * j], pvec[b, 3 * j + 1], pvec[b, 3 * j + 2]
-        x_near, x_far = min(x_near, x - r), max(x_far, x + r)
-        shadow_lo[j], shadow_hi[j] = y - r, y + r
-    if c == 0:
-        x_near = x_far = 0.0
-    # free lanes: the world's height minus the union of the shadows, swept bottom to top
-    lane_lo, lane_hi = np.empty(c + 1), np.empty(c + 1)
-    m, top = 0, bounds[0, 1]
-    for j in np.argsort(shadow_lo, kind="mergesort"):
-        if shadow_lo[j] > top:
-            lane_lo[m], lane_hi[m] = top, shadow_lo[j]
-            m += 1
-        top = max(top, shadow_hi[j])
-    if bounds[1, 1] > top:
-        lane_lo[m], lane_hi[m] = top, bounds[1, 1]
-        m += 1
-    order = np.argsort(lane_lo[:m] - lane_hi[:m], kind="mergesort")
+    x_near, x_far, lane_lo, lane_hi = field_lanes(pvec[b], bounds[0, 1], bounds[1, 1])
     no_room = -2.0 * (bounds[1, 1] - bounds[0, 1])
     for i, a in enumerate(leaders):
         out[i, lo] = x_near - pos[b, a, 0]
         out[i, lo + 1] = x_far - pos[b, a, 0]
         for q in range(N_LANES):
-            if q < m:
-                k = order[q]
-                out[i, lo + 2 + 2 * q] = 0.5 * (lane_lo[k] + lane_hi[k]) - bfit[b, 1]
-                out[i, lo + 3 + 2 * q] = 0.5 * (lane_hi[k] - lane_lo[k]) - half
-            else:
-                out[i, lo + 2 + 2 * q] = 0.0
-                out[i, lo + 3 + 2 * q] = no_room
+            there = q < lane_lo.shape[0]
+            out[i, lo + 2 + 2 * q] = 0.5 * (lane_lo[q] + lane_hi[q]) - bfit[b, 1] if there else 0.0
+            out[i, lo + 3 + 2 * q] = 0.5 * (lane_hi[q] - lane_lo[q]) - half if there else no_room
+
+
+@jit
+def _lane_route(x_near: float, x_far: float, y_lo: float, y_hi: float, p: Array, g: Array) -> float:  # pragma: no cover
+    """One agent's route length (m) from p to g (2,) through the lane whose disc-centre room is [y_lo, y_hi]:
+    before the field straight to (x_near, y*), y* the straight line's crossing clipped to the room, along the
+    lane to (x_far, y*), then straight to g; in the field across to y*, along, then to g; beyond, straight."""
+    if p[0] > x_far:
+        return math.hypot(g[0] - p[0], g[1] - p[1])
+    if p[0] < x_near:
+        frac = min(max((x_near - p[0]) / max(g[0] - p[0], 1e-9), 0.0), 1.0)
+        ys = min(max(p[1] + frac * (g[1] - p[1]), y_lo), y_hi)
+        return math.hypot(x_near - p[0], ys - p[1]) + (x_far - x_near) + math.hypot(g[0] - x_far, g[1] - ys)
+    ys = min(max(p[1], y_lo), y_hi)
+    return abs(ys - p[1]) + (x_far - p[0]) + math.hypot(g[0] - x_far, g[1] - ys)
+
+
+@jit
+def route_row(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
+    """Through one lane (2D; 3D: straight): of the free lanes (unbounded in y) with room for a disc and
+    ``ROUTE_MARGIN`` m each side, the one whose routes (:func:`_lane_route`) sum least over the team.
+    pvec = circles (C * 3,), pos, goal (n, d) -> out (n,), m."""
+    n = pos.shape[0]
+    if pos.shape[1] != 2 or pvec.shape[0] == 0:
+        straight_route(pvec, radius, pos, goal, out)
+        return
+    x_near, x_far, lane_lo, lane_hi = field_lanes(pvec, -np.inf, np.inf)
+    best = np.inf
+    for q in range(lane_lo.shape[0]):
+        y_lo, y_hi = lane_lo[q] + radius + ROUTE_MARGIN, lane_hi[q] - radius - ROUTE_MARGIN
+        if y_lo > y_hi:
+            continue
+        total = 0.0
+        for i in range(n):
+            total += _lane_route(x_near, x_far, y_lo, y_hi, pos[i], goal[i])
+        if total < best:
+            best = total
+            for i in range(n):
+                out[i] = _lane_route(x_near, x_far, y_lo, y_hi, pos[i], goal[i])
 
 
 class ObstacleField(Scenario):
@@ -139,6 +186,7 @@ class ObstacleField(Scenario):
         return params, (self._rotation(raw["angle0"]), b0)
 
     task_row = staticmethod(task_row)
+    route_row = staticmethod(route_row)
 
     def task_feature_bounds(self) -> tuple[Array, Array]:
         if self.d != 2:

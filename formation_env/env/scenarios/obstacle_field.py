@@ -17,6 +17,10 @@ without meeting a disc. The block holds the field's near and far x (min x_c - r 
 leader's x, then, for each of the ``N_LANES`` widest lanes (widest first), its centre's y minus the formation's
 fitted b_y and the room left in it: half its width minus the team's half-height with the discs (negative: the
 formation must shrink to pass). A missing lane reads centre 0 and room -2 H (H the world's height).
+
+The ``approach`` potential's route (2D): through one free lane (unbounded in y here), the one with room for an
+agent's disc and ``ROUTE_MARGIN`` each side whose routes sum least over the team; each agent's route runs
+straight to the lane, along it across the field, then straight to its goal (``route_row``).
 """
 
 from __future__ import annotations

@@ -544,9 +544,13 @@ def test_obstacle_field_task_block_matches_a_marched_grid():
 
 
 def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
-    """The ``approach`` route of ``obstacle_field`` (2D): round a disc through the lane with the shorter
+    """``obstacle_field``'s ``route="lane"`` (2D): round a disc through the lane with the shorter
     routes for the whole team, continuous where an agent enters the field, straight once past it."""
-    from formation_env.env.scenarios.obstacle_field import ROUTE_MARGIN, route_row
+    from formation_env.env.scenarios.obstacle_field import ROUTE_MARGIN, lane_route
+
+    assert Engine("obstacle_field", route="lane").scenario.route_row is lane_route
+    with pytest.raises(FormationError, match="obstacle_field: route must be 'straight', or 'lane' in 2D"):
+        Engine("obstacle_field", framework="bipyramid_3d", route="lane")
 
     disc = np.array([0.0, 0.0, 1.0])  # one circle of radius 1 at the origin: lanes y < -1 and y > 1
     room = 1.0 + 0.1 + ROUTE_MARGIN  # the disc centres' room: |y| >= room
@@ -554,7 +558,7 @@ def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
     def routes(ys, goal_ys=None, x=-4.0):
         out = np.zeros(len(ys))
         pos = np.stack([np.full(len(ys), x), ys], -1)
-        route_row(disc, 0.1, pos, np.stack([np.full(len(ys), 4.0), ys if goal_ys is None else goal_ys], -1), out)
+        lane_route(disc, 0.1, pos, np.stack([np.full(len(ys), 4.0), ys if goal_ys is None else goal_ys], -1), out)
         return out
 
     def via(dy):  # 3 m to the field, 2 m across, 3 m to the goal, offset dy to the room's edge

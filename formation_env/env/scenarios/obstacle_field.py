@@ -18,9 +18,10 @@ leader's x, then, for each of the ``N_LANES`` widest lanes (widest first), its c
 fitted b_y and the room left in it: half its width minus the team's half-height with the discs (negative: the
 formation must shrink to pass). A missing lane reads centre 0 and room -2 H (H the world's height).
 
-The ``approach`` potential's route (2D): through one free lane (unbounded in y here), the one with room for an
-agent's disc and ``ROUTE_MARGIN`` each side whose routes sum least over the team; each agent's route runs
-straight to the lane, along it across the field, then straight to its goal (``route_row``).
+``route="lane"`` (2D) makes the ``approach`` reward's route go through one free lane instead of straight to the
+goal: of the lanes (unbounded in y here) with room for an agent's disc and ``ROUTE_MARGIN`` each side, the one
+whose routes sum least over the team; each agent's route runs straight to the lane, along it across the field,
+then straight to its goal (:func:`lane_route`).
 """
 
 from __future__ import annotations
@@ -112,12 +113,12 @@ def _lane_route(x_near: float, x_far: float, y_lo: float, y_hi: float, p: Array,
 
 
 @jit
-def route_row(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
-    """Through one lane (2D; 3D: straight): of the free lanes (unbounded in y) with room for a disc and
-    ``ROUTE_MARGIN`` m each side, the one whose routes (:func:`_lane_route`) sum least over the team.
-    pvec = circles (C * 3,), pos, goal (n, d) -> out (n,), m."""
+def lane_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
+    """``route="lane"`` (2D): of the free lanes (unbounded in y) with room for a disc and ``ROUTE_MARGIN`` m each
+    side, through the one whose routes (:func:`_lane_route`) sum least over the team; straight without circles.
+    pvec = circles (C * 3,), pos, goal (n, 2) -> out (n,), m."""
     n = pos.shape[0]
-    if pos.shape[1] != 2 or pvec.shape[0] == 0:
+    if pvec.shape[0] == 0:
         straight_route(pvec, radius, pos, goal, out)
         return
     x_near, x_far, lane_lo, lane_hi = field_lanes(pvec, -np.inf, np.inf)
@@ -157,6 +158,11 @@ class ObstacleField(Scenario):
         self.goal_x = check_range("goal_x", kw.pop("goal_x", (4.0, 4.5)))
         self.lateral = check_range("lateral", kw.pop("lateral", (-1.5, 1.5)))
         self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
+        self.route = kw.pop("route", "straight")
+        if self.route not in ("straight", "lane") or (self.route == "lane" and self.d != 2):
+            raise FormationError(
+                f"obstacle_field: route must be 'straight', or 'lane' in 2D, got {self.route!r} (d = {self.d})"
+            )
 
     def draws(self) -> list[Draw]:
         d, c = self.d, self.n_obstacles
@@ -190,7 +196,11 @@ class ObstacleField(Scenario):
         return params, (self._rotation(raw["angle0"]), b0)
 
     task_row = staticmethod(task_row)
-    route_row = staticmethod(route_row)
+
+    @property
+    def route_row(self) -> Any:
+        """The ``approach`` potential's route: :func:`lane_route` for ``route="lane"``, else straight."""
+        return lane_route if self.route == "lane" else straight_route
 
     def task_feature_bounds(self) -> tuple[Array, Array]:
         if self.d != 2:

@@ -544,8 +544,9 @@ def test_obstacle_field_task_block_matches_a_marched_grid():
 
 
 def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
-    """``obstacle_field``'s ``route="lane"`` (2D): round a disc through the lane with the shorter
-    routes for the whole team, continuous where an agent enters the field, straight once past it."""
+    """``obstacle_field``'s ``route="lane"`` (2D): round a disc through the lane with the shorter routes for
+    the whole team, never a lane narrower than LANE_WIDTH, continuous where an agent enters the field, straight
+    once past it."""
     from formation_env.env.scenarios.obstacle_field import ROUTE_MARGIN, lane_route
 
     assert Engine("obstacle_field", route="lane").scenario.route_row is lane_route
@@ -571,3 +572,5 @@ def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
         assert before == pytest.approx(inside, abs=1e-6)
     assert routes(np.array([2.0]), x=-1.0)[0] == pytest.approx(5.0)
     assert routes(np.array([0.0]), x=1.5)[0] == pytest.approx(2.5)  # past the field: straight
+    disc = np.array([0.0, -0.95, 0.5, 0.0, 0.95, 0.5])  # a lane 0.9 m wide between two discs: too narrow
+    assert routes(np.array([0.0]))[0] == pytest.approx(2 * np.hypot(3.5, 1.45 + 0.15) + 1.0)

@@ -19,9 +19,9 @@ fitted b_y and the room left in it: half its width minus the team's half-height 
 formation must shrink to pass). A missing lane reads centre 0 and room -2 H (H the world's height).
 
 ``route="lane"`` (2D) makes the ``approach`` reward's route go through one free lane instead of straight to the
-goal: of the lanes (unbounded in y here) with room for an agent's disc and ``ROUTE_MARGIN`` each side, the one
-whose routes sum least over the team; each agent's route runs straight to the lane, along it across the field,
-then straight to its goal (:func:`lane_route`).
+goal: of the lanes (unbounded in y here) at least ``LANE_WIDTH`` wide, the one whose routes sum least over the
+team. Each agent's route runs straight to the lane, along it across the field (its disc ``ROUTE_MARGIN`` from
+the lane's edges), then straight to its goal (:func:`lane_route`).
 """
 
 from __future__ import annotations
@@ -39,7 +39,7 @@ from ..kernel import straight_route
 from ..obstacles import Circle
 from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
 
-__all__ = ["N_LANES", "ROUTE_MARGIN", "ObstacleField"]
+__all__ = ["LANE_WIDTH", "N_LANES", "ROUTE_MARGIN", "ObstacleField"]
 
 #: Lanes in the ``task`` block (the widest, widest first).
 N_LANES = 3
@@ -47,6 +47,8 @@ N_LANES = 3
 
 #: Room (m) the ``approach`` reward's route keeps between an agent's disc and a lane's edges.
 ROUTE_MARGIN = 0.05
+#: Narrowest lane (m) the route takes: the passage's narrowest gap, which the team passes at half its height.
+LANE_WIDTH = 1.0
 
 
 @jit
@@ -114,8 +116,8 @@ def _lane_route(x_near: float, x_far: float, y_lo: float, y_hi: float, p: Array,
 
 @jit
 def lane_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
-    """``route="lane"`` (2D): of the free lanes (unbounded in y) with room for a disc and ``ROUTE_MARGIN`` m each
-    side, through the one whose routes (:func:`_lane_route`) sum least over the team; straight without circles.
+    """``route="lane"`` (2D): of the free lanes (unbounded in y) at least ``LANE_WIDTH`` wide, through the one
+    whose routes (:func:`_lane_route`) sum least over the team; straight without circles.
     pvec = circles (C * 3,), pos, goal (n, 2) -> out (n,), m."""
     n = pos.shape[0]
     if pvec.shape[0] == 0:
@@ -124,9 +126,9 @@ def lane_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) 
     x_near, x_far, lane_lo, lane_hi = field_lanes(pvec, -np.inf, np.inf)
     best = np.inf
     for q in range(lane_lo.shape[0]):
-        y_lo, y_hi = lane_lo[q] + radius + ROUTE_MARGIN, lane_hi[q] - radius - ROUTE_MARGIN
-        if y_lo > y_hi:
+        if lane_hi[q] - lane_lo[q] < LANE_WIDTH:
             continue
+        y_lo, y_hi = lane_lo[q] + radius + ROUTE_MARGIN, lane_hi[q] - radius - ROUTE_MARGIN
         total = 0.0
         for i in range(n):
             total += _lane_route(x_near, x_far, y_lo, y_hi, pos[i], goal[i])

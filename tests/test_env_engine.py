@@ -574,3 +574,14 @@ def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
     assert routes(np.array([0.0]), x=1.5)[0] == pytest.approx(2.5)  # past the field: straight
     disc = np.array([0.0, -0.95, 0.5, 0.0, 0.95, 0.5])  # a lane 0.9 m wide between two discs: too narrow
     assert routes(np.array([0.0]))[0] == pytest.approx(2 * np.hypot(3.5, 1.45 + 0.15) + 1.0)
+
+
+def test_obstacle_field_mirror_puts_discs_by_both_edges():
+    """``mirror=True`` signs each disc's y at random; off, the default stream is unchanged."""
+    rng = np.random.default_rng
+    plain = Engine("obstacle_field").reset(rng(0), 64).params["circles"]
+    np.testing.assert_array_equal(Engine("obstacle_field", mirror=False).reset(rng(0), 64).params["circles"], plain)
+    y = Engine("obstacle_field", mirror=True, obstacle_y=(3.5, 4.0)).reset(rng(0), 64).params["circles"][..., 1]
+    assert np.all((np.abs(y) >= 3.5) & (np.abs(y) <= 4.0)) and (y > 0).any() and (y < 0).any()
+    with pytest.raises(FormationError, match="obstacle_field: mirror must be True or False, got 'yes'"):
+        Engine("obstacle_field", mirror="yes")

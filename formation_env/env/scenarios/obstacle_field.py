@@ -4,7 +4,9 @@ Per episode (uniform draws; ranges are keyword arguments):
 
 * World box x in [-7, 7], other axes in [-5, 5].
 * ``n_obstacles`` = 6 obstacles, centres with x in [-1.5, 1.0] and the other coordinates in
-  [-4, 4], radii in [0.3, 0.6] m; they may overlap. Start and goal regions are clear of them.
+  [-4, 4] (``obstacle_y``), radii in [0.3, 0.6] m; they may overlap. Start and goal regions are clear of them.
+  ``mirror=True`` gives each centre's other coordinates a random sign after the draw: the default range keeps its
+  distribution (other episodes), and a range on one side, e.g. [3.5, 4], puts discs by both edges.
 * Start pose: rotation by psi0 in [-pi/12, pi/12] (3D: about z), b0 with x in [-4.5, -4], the rest
   in [-1.5, 1.5]; goal pose: rotation by psi_g in the same range, b_g with x in [4, 4.5].
 
@@ -160,6 +162,9 @@ class ObstacleField(Scenario):
         self.goal_x = check_range("goal_x", kw.pop("goal_x", (4.0, 4.5)))
         self.lateral = check_range("lateral", kw.pop("lateral", (-1.5, 1.5)))
         self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
+        self.mirror = kw.pop("mirror", False)
+        if not isinstance(self.mirror, bool):
+            raise FormationError(f"obstacle_field: mirror must be True or False, got {self.mirror!r}")
         self.route = kw.pop("route", "straight")
         if self.route not in ("straight", "lane") or (self.route == "lane" and self.d != 2):
             raise FormationError(
@@ -171,6 +176,7 @@ class ObstacleField(Scenario):
         return [
             Draw("obstacle_x", (c, 1), bounds=self.obstacle_x),
             Draw("obstacle_y", (c, d - 1), bounds=self.obstacle_y),
+            *([Draw("obstacle_side", (c, 1), "sign")] if self.mirror else []),
             Draw("obstacle_radius", (c, 1), bounds=self.obstacle_radius),
             Draw("angle0", bounds=self.angle),
             Draw("start_x", (1,), bounds=self.start_x),
@@ -187,7 +193,8 @@ class ObstacleField(Scenario):
         return rotation_3d(np.tile([0.0, 0.0, 1.0], (angle.shape[0], 1)), angle)
 
     def build(self, raw: dict[str, Array]) -> tuple[dict[str, Array], tuple[Array, Array] | None]:
-        circles = np.concatenate([raw["obstacle_x"], raw["obstacle_y"], raw["obstacle_radius"]], -1)
+        y = raw["obstacle_y"] * raw["obstacle_side"] if self.mirror else raw["obstacle_y"]
+        circles = np.concatenate([raw["obstacle_x"], y, raw["obstacle_radius"]], -1)
         b0 = np.concatenate([raw["start_x"], raw["start_lateral"]], -1)
         bg = np.concatenate([raw["goal_x"], raw["goal_lateral"]], -1)
         params = {
@@ -221,10 +228,12 @@ class ObstacleField(Scenario):
 
     @property
     def param_low(self) -> Array:
-        lo = [self.obstacle_x[0]] + [self.obstacle_y[0]] * (self.d - 1) + [self.obstacle_radius[0]]
+        y_lo = -max(abs(v) for v in self.obstacle_y) if self.mirror else self.obstacle_y[0]
+        lo = [self.obstacle_x[0]] + [y_lo] * (self.d - 1) + [self.obstacle_radius[0]]
         return np.tile(lo, self.n_obstacles).astype(np.float64)
 
     @property
     def param_high(self) -> Array:
-        hi = [self.obstacle_x[1]] + [self.obstacle_y[1]] * (self.d - 1) + [self.obstacle_radius[1]]
+        y_hi = max(abs(v) for v in self.obstacle_y) if self.mirror else self.obstacle_y[1]
+        hi = [self.obstacle_x[1]] + [y_hi] * (self.d - 1) + [self.obstacle_radius[1]]
         return np.tile(hi, self.n_obstacles).astype(np.float64)

@@ -520,7 +520,8 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
     )  # fmt: skip
     p.add_argument(
         "--range-curriculum", default="", metavar="JSON",
-        help='episode-draw curriculum over the recipe\'s, e.g. {"start": {"gap_width": [2.4, 3.0]}, "fraction": 0.5}',
+        help='episode-draw curriculum over the recipe\'s, e.g. {"start": {"gap_width": [2.4, 3.0]}, "fraction": 0.5}; '
+        '"begin": b holds the start ranges until b of training',
     )  # fmt: skip
     p.add_argument("--env-version", type=int, default=None, help="env version of the defaults (0, 1); default 0")
     p.add_argument(

@@ -172,9 +172,11 @@ def test_recipe_run_is_reproducible_and_the_leaderboard_reads_it(tmp_path: Path,
     assert rows["ppo_commander"]["kind"] == "learned" and rows["ppo_commander"]["policies"] == [
         "hold_ppo_commander_seed3.zip"
     ]
-    for key in ("success_rate", "collision_rate", "time_to_goal", "time_lower_bound"):
+    for key in ("success_rate", "collision_rate", "time_to_goal", "time_lower_bound", "time_vs_analytic"):
         assert key in rows["analytic"]["metrics"] and key in rows["ppo_commander"]["metrics"]
-    assert rows["ppo_shared"]["metrics"] is None
+    assert rows["analytic"]["metrics"]["time_vs_analytic"] == 0.0  # paired with itself
+    assert len(rows["ppo_commander"]["time_vs_analytic_ci95"]) == 1  # one interval per seed
+    assert rows["ppo_shared"]["metrics"] is None and rows["ppo_residual"]["metrics"] is None
     assert rows["analytic"]["metrics"]["success_rate"] == 1.0
     assert "## hold" in md.read_text()
 

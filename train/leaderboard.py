@@ -2,14 +2,17 @@
 
 Entries (:data:`ENTRIES`): ``random`` (uniform actions, seeded), ``analytic`` (the scenario's tuned planner,
 :mod:`agents.planner`), and the learned ones, ``ppo_commander`` (one policy on the global state, from
-scratch), ``ppo_shared`` (decentralised leaders sharing one policy) and ``sac_commander``. A learned entry is
+scratch), ``ppo_shared`` (decentralised leaders sharing one policy), ``sac_commander`` and ``ppo_residual`` (a
+learned correction on the planner: action = planner + scale policy, ``train.leaders --residual``). A learned entry is
 the policies ``<scenario>_<entry>_seed<k>.zip`` found in the policy folder (``agents/pretrained/`` by
 default), one per training seed: its metrics are the mean over seeds of each seed's suite metrics, with the
 spread across seeds (min, max) beside them. An entry with no shipped policy is listed as not trained.
 
 Every entry of a scenario meets the same episodes (seeds ``seed .. seed + episodes - 1``). Beside the time
 to goal stands ``time_lower_bound``: the mean over the same solved episodes of :mod:`agents.bounds`' lower
-bound (over all episodes when none is solved).
+bound (over all episodes when none is solved); ``time_vs_analytic`` is the entry's time minus the planner's, paired
+by episode over the episodes both solved (s; negative: faster than the planner), with each seed's 95 % interval in
+the JSON (``time_vs_analytic_ci95``).
 
 ``formation-env leaderboard [--episodes N] [--seed S] [--json]`` writes ``docs/leaderboard.md``; with
 ``--json`` it prints ``{"scenarios": {scenario: {entry: {"kind", "metrics", ...}}}}``.
@@ -34,7 +37,7 @@ from agents.policy import POLICY_DIR
 from formation_env._progress import add_progress_argument, progress_bar
 from formation_env.env.scenarios import REGISTRY
 
-from .evaluate import _finite, make_engine
+from .evaluate import _finite, make_engine, paired_difference
 from .evaluate import evaluate as evaluate_suite
 
 __all__ = ["ENTRIES", "LEARNED", "find_policies", "leaderboard", "main", "markdown"]
@@ -44,11 +47,12 @@ LEARNED: dict[str, tuple[str, str]] = {
     "ppo_commander": ("ppo", "commander"),
     "ppo_shared": ("ppo", "shared"),
     "sac_commander": ("sac", "commander"),
+    "ppo_residual": ("ppo", "commander"),
 }
 #: Every entry, in table order.
 ENTRIES: tuple[str, ...] = ("random", "analytic", *LEARNED)
 #: Metrics of every entry (``evaluate``'s, with the time bound).
-SHOWN = ("success_rate", "collision_rate", "time_to_goal", "time_lower_bound", "mean_formation_err")
+SHOWN = ("success_rate", "collision_rate", "time_to_goal", "time_vs_analytic", "time_lower_bound", "mean_formation_err")
 PRETRAINED = POLICY_DIR
 
 
@@ -59,11 +63,13 @@ def find_policies(folder: str | Path, scenario: str, entry: str) -> list[Path]:
     return [p for _, p in sorted(found)]
 
 
-def _with_bound(result: dict[str, Any], bound: np.ndarray) -> dict[str, float]:
+def _with_bound(result: dict[str, Any], bound: np.ndarray, analytic: dict[str, Any]) -> dict[str, float]:
+    """``evaluate``'s metrics with ``time_lower_bound`` and ``time_vs_analytic`` (paired with ``analytic``)."""
     metrics = dict(result["metrics"])
     t = np.asarray(result["per_episode"]["time_to_goal"], dtype=np.float64)
     solved = np.isfinite(t)
     metrics["time_lower_bound"] = float(np.mean(bound[solved] if solved.any() else bound))
+    metrics["time_vs_analytic"] = paired_difference(analytic, result)[0]
     return metrics
 
 
@@ -94,11 +100,11 @@ def leaderboard(
             warnings.simplefilter("ignore")
             bound = time_lower_bound_seeds(make_engine(sc), seeds)
         rows: dict[str, Any] = {}
-        for entry in ("random", "analytic"):
-            res = evaluate(entry, sc)
+        base = {entry: evaluate(entry, sc) for entry in ("random", "analytic")}
+        for entry, res in base.items():
             rows[entry] = {
                 "kind": entry,
-                "metrics": _with_bound(res, bound),
+                "metrics": _with_bound(res, bound, base["analytic"]),
                 "ci95": res["ci95"],
                 "worst": res["worst"],
             }
@@ -107,7 +113,8 @@ def leaderboard(
             if not paths:
                 rows[entry] = {"kind": "learned", "metrics": None, "note": "no shipped policy"}
                 continue
-            per_seed = [_with_bound(evaluate(str(p), sc), bound) for p in paths]
+            results = [evaluate(str(p), sc) for p in paths]
+            per_seed = [_with_bound(r, bound, base["analytic"]) for r in results]
             keys = per_seed[0].keys()
             mean = {k: float(np.nanmean([m[k] for m in per_seed])) if _any_finite(per_seed, k) else float("nan")
                     for k in keys}  # fmt: skip
@@ -118,6 +125,7 @@ def leaderboard(
                 "metrics": mean,
                 "spread_across_seeds": spread,
                 "per_seed": per_seed,
+                "time_vs_analytic_ci95": [list(paired_difference(base["analytic"], r)[1:3]) for r in results],
                 "policies": [p.name for p in paths],
             }
         out[sc] = rows
@@ -138,7 +146,7 @@ def _cell(entry: dict[str, Any], key: str) -> str:
     spread = entry.get("spread_across_seeds")
     if spread is not None and np.isfinite(v) and len(entry.get("per_seed", [])) > 1:
         lo, hi = spread[key]
-        txt += f" ({lo:.3g}-{hi:.3g})"
+        txt += f" ({lo:.3g} to {hi:.3g})"
     return txt
 
 
@@ -151,9 +159,12 @@ def markdown(board: dict[str, Any], command: str) -> str:
         f"{board['episodes']} episodes per scenario, seeds {board['seed']}..{board['seed'] + board['episodes'] - 1}; "
         "every entry meets the same episodes.",
         "",
-        "Columns: success and collision rates over the suite; time to goal (s) over solved episodes; the lower "
-        "bound on it (s, `agents/bounds.py`: the leaders' travel under the input bound, obstacles ignored) over "
-        "the same episodes; mean formation error (m). Learned entries: mean over training seeds, (min-max "
+        "Columns: success and collision rates over the suite; time to goal (s) over solved episodes; "
+        "`time_vs_analytic`: that time minus the planner's, paired by episode over the episodes both solved (s; "
+        "negative: faster); the lower bound on the time (s, `agents/bounds.py`: the leaders' travel under the "
+        "input bound, obstacles ignored) over the solved episodes; mean formation error (m). `ppo_residual`: a "
+        "correction learned on top of the planner (action = planner + scale policy), not from scratch. Learned "
+        "entries: mean over training seeds, (min to max "
         "across seeds) beside it; `-`: not trained or no episode solved.",
         "",
     ]

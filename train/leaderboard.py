@@ -51,7 +51,7 @@ LEARNED: dict[str, tuple[str, str]] = {
 }
 #: Every entry, in table order.
 ENTRIES: tuple[str, ...] = ("random", "analytic", *LEARNED)
-#: Metrics of every entry (``evaluate``'s, with the time bound).
+#: Metrics of every entry's tables (``evaluate``'s, with the time bound and the paired time against the planner).
 SHOWN = ("success_rate", "collision_rate", "time_to_goal", "time_vs_analytic", "time_lower_bound", "mean_formation_err")
 PRETRAINED = POLICY_DIR
 
@@ -63,7 +63,7 @@ def find_policies(folder: str | Path, scenario: str, entry: str) -> list[Path]:
     return [p for _, p in sorted(found)]
 
 
-def _with_bound(result: dict[str, Any], bound: np.ndarray, analytic: dict[str, Any]) -> dict[str, float]:
+def _suite_metrics(result: dict[str, Any], bound: np.ndarray, analytic: dict[str, Any]) -> dict[str, float]:
     """``evaluate``'s metrics with ``time_lower_bound`` and ``time_vs_analytic`` (paired with ``analytic``)."""
     metrics = dict(result["metrics"])
     t = np.asarray(result["per_episode"]["time_to_goal"], dtype=np.float64)
@@ -104,7 +104,7 @@ def leaderboard(
         for entry, res in base.items():
             rows[entry] = {
                 "kind": entry,
-                "metrics": _with_bound(res, bound, base["analytic"]),
+                "metrics": _suite_metrics(res, bound, base["analytic"]),
                 "ci95": res["ci95"],
                 "worst": res["worst"],
             }
@@ -114,7 +114,7 @@ def leaderboard(
                 rows[entry] = {"kind": "learned", "metrics": None, "note": "no shipped policy"}
                 continue
             results = [evaluate(str(p), sc) for p in paths]
-            per_seed = [_with_bound(r, bound, base["analytic"]) for r in results]
+            per_seed = [_suite_metrics(r, bound, base["analytic"]) for r in results]
             keys = per_seed[0].keys()
             mean = {k: float(np.nanmean([m[k] for m in per_seed])) if _any_finite(per_seed, k) else float("nan")
                     for k in keys}  # fmt: skip
@@ -164,8 +164,8 @@ def markdown(board: dict[str, Any], command: str) -> str:
         "negative: faster); the lower bound on the time (s, `agents/bounds.py`: the leaders' travel under the "
         "input bound, obstacles ignored) over the solved episodes; mean formation error (m). `ppo_residual`: a "
         "correction learned on top of the planner (action = planner + scale policy), not from scratch. Learned "
-        "entries: mean over training seeds, (min to max "
-        "across seeds) beside it; `-`: not trained or no episode solved.",
+        "entries: mean over training seeds, (min to max across seeds) beside it; `-`: not trained or no episode "
+        "solved.",
         "",
     ]
     for sc, rows in board["scenarios"].items():

@@ -63,13 +63,13 @@ def find_policies(folder: str | Path, scenario: str, entry: str) -> list[Path]:
     return [p for _, p in sorted(found)]
 
 
-def _suite_metrics(result: dict[str, Any], bound: np.ndarray, analytic: dict[str, Any]) -> dict[str, float]:
-    """``evaluate``'s metrics with ``time_lower_bound`` and ``time_vs_analytic`` (paired with ``analytic``)."""
+def _suite_metrics(result: dict[str, Any], bound: np.ndarray, vs_analytic: float) -> dict[str, float]:
+    """``evaluate``'s metrics with ``time_lower_bound`` and ``time_vs_analytic`` (``vs_analytic``, s)."""
     metrics = dict(result["metrics"])
     t = np.asarray(result["per_episode"]["time_to_goal"], dtype=np.float64)
     solved = np.isfinite(t)
     metrics["time_lower_bound"] = float(np.mean(bound[solved] if solved.any() else bound))
-    metrics["time_vs_analytic"] = paired_difference(analytic, result)[0]
+    metrics["time_vs_analytic"] = vs_analytic
     return metrics
 
 
@@ -104,7 +104,7 @@ def leaderboard(
         for entry, res in base.items():
             rows[entry] = {
                 "kind": entry,
-                "metrics": _suite_metrics(res, bound, base["analytic"]),
+                "metrics": _suite_metrics(res, bound, paired_difference(base["analytic"], res)[0]),
                 "ci95": res["ci95"],
                 "worst": res["worst"],
             }
@@ -114,7 +114,8 @@ def leaderboard(
                 rows[entry] = {"kind": "learned", "metrics": None, "note": "no shipped policy"}
                 continue
             results = [evaluate(str(p), sc) for p in paths]
-            per_seed = [_suite_metrics(r, bound, base["analytic"]) for r in results]
+            diffs = [paired_difference(base["analytic"], r) for r in results]  # (mean, lo, hi, n) per seed
+            per_seed = [_suite_metrics(r, bound, d[0]) for r, d in zip(results, diffs, strict=True)]
             keys = per_seed[0].keys()
             mean = {k: float(np.nanmean([m[k] for m in per_seed])) if _any_finite(per_seed, k) else float("nan")
                     for k in keys}  # fmt: skip
@@ -125,7 +126,7 @@ def leaderboard(
                 "metrics": mean,
                 "spread_across_seeds": spread,
                 "per_seed": per_seed,
-                "time_vs_analytic_ci95": [list(paired_difference(base["analytic"], r)[1:3]) for r in results],
+                "time_vs_analytic_ci95": [[d[1], d[2]] for d in diffs],
                 "policies": [p.name for p in paths],
             }
         out[sc] = rows

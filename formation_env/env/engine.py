@@ -229,7 +229,6 @@ class Engine:
         pairs = np.stack(np.triu_indices(n, 1), axis=1) if n <= ALL_PAIRS_UP_TO else fw.edge_array()
         #: The agent pairs (pair_i[k], pair_j[k]) checked for contact (all up to ALL_PAIRS_UP_TO agents, else edges).
         self.pair_i, self.pair_j = (np.ascontiguousarray(pairs[:, c], dtype=np.int64) for c in (0, 1))
-        self._fast = 2.0 * self.agent_radius / math.sqrt(d)
         if self.pair_i.size:
             gaps = np.linalg.norm(fw.positions[self.pair_i] - fw.positions[self.pair_j], axis=1)
             if gaps.min() < 2.0 * self.agent_radius:
@@ -391,13 +390,20 @@ class Engine:
                 c_t=self._C_T, ca_t=self._CA_T if self._CA_T is not None else np.zeros((0, d)), bounds=self.bounds,
                 ray_dirs=self.ray_dirs, obs_low=self.observer.low, obs_high=self.observer.high,
                 noise_mask=self.observer.noise_mask, weights=weights, dt=self.dt, u_max=self.u_max,
-                radius=self.agent_radius, fast=self._fast, goal_tol=self.scenario.goal_tol,
+                radius=self.agent_radius, fast=2.0 * self.agent_radius / math.sqrt(d), goal_tol=self.scenario.goal_tol,
                 formation_tol=self.scenario.formation_tol, v_bound=self.v_bound, obstacle_range=self.obstacle_range,
                 sense_radius=self.sense_radius, max_cycles=self.max_cycles, hold_steps=self.scenario.hold_steps,
                 n_nearest=self.n_nearest, k_nearest=self.k_nearest,
                 end_on_success=self.scenario.terminate_on_success,
             )  # fmt: skip
         return self._consts, mod
+
+    def set_agent_radius(self, agent_radius: float) -> None:
+        """The agents' disc radius (m) from the next step on: contacts, clearances, the route and the episode draws
+        use it (a trainer's safety margin, :class:`train.leaders.RadiusCurriculum`)."""
+        check_number("agent_radius", agent_radius, positive=False)
+        self.agent_radius = self.scenario.agent_radius = float(agent_radius)
+        self._consts = None
 
     def _noise(self, B: int, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> Array:
         """Observation noise (B, n_l, obs_dim) drawn from ``rng`` (or one generator per env), or none."""

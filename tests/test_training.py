@@ -336,12 +336,16 @@ def test_set_agent_radius_acts_as_the_radius_given_at_construction() -> None:
         eng.set_agent_radius(-0.1)
 
 
-def test_radius_curriculum_grows_the_radius_to_the_training_envs_and_evaluation_ignores_it() -> None:
+def test_radius_curriculum_grows_the_radius_late_and_evaluation_ignores_it() -> None:
     from train.evaluate import SENSING_KWARGS
     from train.leaders import RadiusCurriculum
 
-    eng = Engine("narrow_passage", agent_radius=0.12)
-    cur = RadiusCurriculum.from_recipe(eng, {"start": 0.1, "begin": 0.3, "fraction": 0.5}, 1000)
+    eng = Engine("narrow_passage")
+    cur = RadiusCurriculum.from_recipe(eng, {"end": 0.12, "begin": 0.3, "fraction": 0.5}, 1000)
+    eng._kernel()
+    cur.num_timesteps = 300
+    cur._on_step()
+    assert eng._consts is not None  # the env's own radius until ``begin``: the step is not even rebuilt
     for t, expect in ((0, 0.1), (300, 0.1), (400, 0.11), (500, 0.12), (900, 0.12)):
         cur.num_timesteps = t
         cur._on_step()
@@ -350,10 +354,10 @@ def test_radius_curriculum_grows_the_radius_to_the_training_envs_and_evaluation_
     cur._on_step()
     cur._on_training_end()
     assert eng.agent_radius == 0.12
-    with pytest.raises(ValueError, match="radius curriculum: start must be a radius >= 0"):
+    with pytest.raises(ValueError, match="radius curriculum: end must be a radius >= 0"):
         RadiusCurriculum(eng, -0.1, 0.5, 1000)
-    with pytest.raises(ValueError, match=r"radius curriculum: give start, fraction and optionally begin"):
-        RadiusCurriculum.from_recipe(eng, {"start": 0.1}, 1000)
+    with pytest.raises(ValueError, match=r"radius curriculum: give end, fraction and optionally begin"):
+        RadiusCurriculum.from_recipe(eng, {"start": 0.1, "fraction": 0.5}, 1000)
     assert "agent_radius" not in SENSING_KWARGS  # a training margin: every evaluation uses the env's 0.1 m
 
 

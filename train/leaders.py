@@ -319,26 +319,26 @@ class RangeCurriculum(_Ramp):
 
 
 class RadiusCurriculum(_Ramp):
-    """A safety margin learned late: the agents' radius (contacts, clearances) starts at ``start`` (m), stays
-    there until ``begin`` of the training timesteps and grows linearly to the training env's ``agent_radius``
-    (the recipe's ``env_kwargs``) until ``fraction`` of them (:meth:`Engine.set_agent_radius`). Evaluation uses
-    the env's default radius (0.1 m), whatever the training's."""
+    """A safety margin learned late: the agents' radius (contacts, clearances) stays the training env's
+    ``agent_radius`` until ``begin`` of the training timesteps and grows linearly to ``end`` (m) until ``fraction``
+    of them (:meth:`Engine.set_agent_radius`). Evaluation uses the env's radius (0.1 m by default), whatever the
+    training's."""
 
-    def __init__(self, engine: Any, start: float, fraction: float, total: int, begin: float = 0.0) -> None:
+    def __init__(self, engine: Any, end: float, fraction: float, total: int, begin: float = 0.0) -> None:
         super().__init__("radius curriculum", fraction, total, begin)
-        if not (isinstance(start, int | float) and 0.0 <= start):
-            raise ValueError(f"radius curriculum: start must be a radius >= 0 (m), got {start!r}")
-        self.engine, self.start, self.final = engine, float(start), float(engine.agent_radius)
+        if not (isinstance(end, int | float) and 0.0 <= end):
+            raise ValueError(f"radius curriculum: end must be a radius >= 0 (m), got {end!r}")
+        self.engine, self.start, self.end = engine, float(engine.agent_radius), float(end)
 
     @classmethod
     def from_recipe(cls, engine: Any, recipe: dict[str, Any], total: int) -> RadiusCurriculum:
-        """From a recipe's ``radius_curriculum`` mapping: ``start``, ``fraction`` and optionally ``begin``."""
-        start, fraction, begin = cls.recipe_args("radius curriculum", recipe, "start")
-        return cls(engine, start, fraction, total, begin)
+        """From a recipe's ``radius_curriculum`` mapping: ``end``, ``fraction`` and optionally ``begin``."""
+        end, fraction, begin = cls.recipe_args("radius curriculum", recipe, "end")
+        return cls(engine, end, fraction, total, begin)
 
     def _set(self, left: float) -> None:
-        radius = self.final + left * (self.start - self.final)
-        if radius != self.engine.agent_radius:
+        radius = self.end + left * (self.start - self.end)
+        if radius != self.engine.agent_radius:  # until ``begin`` the run is the one without the curriculum
             self.engine.set_agent_radius(radius)
 
 
@@ -414,9 +414,9 @@ def train(
         range_curriculum: ``{"start": {range name: [lo, hi]}, "fraction": f, "begin": b}``: those episode draws
             start at the given ranges, stay there until ``b`` of the timesteps (optional, default 0) and reach the
             scenario's own after ``f`` of them (:class:`RangeCurriculum`).
-        radius_curriculum: ``{"start": r0, "fraction": f, "begin": b}``: the agents' radius starts at ``r0`` (m),
-            stays there until ``b`` of the timesteps and reaches ``env_kwargs``' ``agent_radius`` after ``f`` of
-            them (:class:`RadiusCurriculum`): a training margin, learned once the task is.
+        radius_curriculum: ``{"end": r, "fraction": f, "begin": b}``: the agents' radius stays the env's until
+            ``b`` of the timesteps and grows to ``r`` (m) after ``f`` of them (:class:`RadiusCurriculum`): a
+            training margin, learned once the task is.
         env_version: the env version whose defaults ``env_kwargs`` sit over (:mod:`formation_env.env.versions`;
             1 is ``formation_v1``).
         central_critic: (shared PPO) the critic reads the global state too, the actor only the leader's own
@@ -576,8 +576,8 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
     )  # fmt: skip
     p.add_argument(
         "--radius-curriculum", default="", metavar="JSON",
-        help='agents\' radius curriculum over the recipe\'s, e.g. {"start": 0.1, "begin": 0.3, "fraction": 0.5}: '
-        "from start (m) to --env-kwargs' agent_radius",
+        help='agents\' radius curriculum over the recipe\'s, e.g. {"end": 0.12, "begin": 0.3, "fraction": 0.5}: '
+        "from the env's agent_radius to end (m)",
     )  # fmt: skip
     p.add_argument("--env-version", type=int, default=None, help="env version of the defaults (0, 1); default 0")
     p.add_argument(

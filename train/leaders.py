@@ -267,11 +267,11 @@ class _Ramp(BaseCallback):
         self.span = max(1, int(fraction * total) - self.first)
 
     @staticmethod
-    def recipe_args(what: str, recipe: dict[str, Any], first: str) -> tuple[Any, float, float]:
-        """(``recipe[first]``, fraction, begin) of a recipe's mapping ``{first, fraction[, begin]}``."""
-        if set(recipe) - {first, "fraction", "begin"} or not {first, "fraction"} <= set(recipe):
-            raise ValueError(f"{what}: give {first}, fraction and optionally begin, got {sorted(recipe)}")
-        return recipe[first], float(recipe["fraction"]), float(recipe.get("begin", 0.0))
+    def recipe_args(what: str, recipe: dict[str, Any], key: str) -> tuple[Any, float, float]:
+        """(``recipe[key]``, fraction, begin) of a recipe's mapping ``{key, fraction[, begin]}``."""
+        if set(recipe) - {key, "fraction", "begin"} or not {key, "fraction"} <= set(recipe):
+            raise ValueError(f"{what}: give {key}, fraction and optionally begin, got {sorted(recipe)}")
+        return recipe[key], float(recipe["fraction"]), float(recipe.get("begin", 0.0))
 
     def _set(self, left: float) -> None:
         raise NotImplementedError
@@ -337,7 +337,7 @@ class RadiusCurriculum(_Ramp):
         return cls(engine, end, fraction, total, begin)
 
     def _set(self, left: float) -> None:
-        radius = self.end + left * (self.start - self.end)
+        radius = self.start if left >= 1.0 else self.end + left * (self.start - self.end)
         if radius != self.engine.agent_radius:  # until ``begin`` the run is the one without the curriculum
             self.engine.set_agent_radius(radius)
 

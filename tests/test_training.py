@@ -9,7 +9,6 @@ import pytest
 from oracle import route_lengths
 
 from agents.policy import LearnedPolicy, load_policy
-from formation_env.core.errors import FormationError
 from formation_env.env.engine import Engine
 from train.evaluate import METRIC_KEYS, evaluate, reset_paired
 from train.leaders import train
@@ -313,57 +312,7 @@ def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:
         RangeCurriculum.from_recipe(eng, {"strat": {}, "fraction": 0.5}, 1000)
 
 
-def _episode(eng: Engine, steps: int = 40) -> list[np.ndarray]:
-    """Rewards, flags and clearances of 8 seeded narrow_passage episodes under seeded random actions."""
-    state, rng, out = eng.reset(np.random.default_rng(5), 8), np.random.default_rng(6), []
-    for _ in range(steps):
-        state, _, rew, term, _, info = eng.step(state, rng.uniform(-1, 1, (8, eng.n_l, eng.p)))
-        out += [rew, term, info["collision"], info["min_clearance"]]
-    return out
-
-
-def test_set_agent_radius_acts_as_the_radius_given_at_construction() -> None:
-    built = _episode(Engine("narrow_passage", agent_radius=0.14))
-    eng = Engine("narrow_passage")
-    default = _episode(eng)
-    eng.set_agent_radius(0.14)
-    for x, y in zip(_episode(eng), built, strict=True):
-        np.testing.assert_array_equal(x, y)
-    assert eng.scenario.agent_radius == 0.14
-    # the larger discs touch sooner: clearances 4 cm (two discs) or 2 cm (a disc and a wall) smaller
-    assert not np.array_equal(built[3], default[3]) and np.all(built[3] <= default[3] - 0.02 + 1e-12)
-    with pytest.raises(FormationError, match="agent_radius"):
-        eng.set_agent_radius(-0.1)
-
-
-def test_radius_curriculum_grows_the_radius_late_and_evaluation_ignores_it() -> None:
-    from train.evaluate import SENSING_KWARGS
-    from train.leaders import RadiusCurriculum
-
-    eng = Engine("narrow_passage")
-    cur = RadiusCurriculum.from_recipe(eng, {"end": 0.12, "begin": 0.3, "fraction": 0.5}, 1000)
-    eng._kernel()
-    cur.num_timesteps = 300
-    cur._on_step()
-    assert eng._consts is not None  # the env's own radius until ``begin``: the step is not even rebuilt
-    for t, expect in ((0, 0.1), (300, 0.1), (400, 0.11), (500, 0.12), (900, 0.12)):
-        cur.num_timesteps = t
-        cur._on_step()
-        assert eng.agent_radius == pytest.approx(expect) and eng.scenario.agent_radius == eng.agent_radius
-    cur.num_timesteps = 0
-    cur._on_step()
-    cur._on_training_end()
-    assert eng.agent_radius == 0.12
-    with pytest.raises(ValueError, match="radius curriculum: end must be a radius >= 0"):
-        RadiusCurriculum(eng, -0.1, 0.5, 1000)
-    with pytest.raises(ValueError, match=r"radius curriculum: give end, fraction and optionally begin"):
-        RadiusCurriculum.from_recipe(eng, {"start": 0.1, "fraction": 0.5}, 1000)
-    assert "agent_radius" not in SENSING_KWARGS  # a training margin: every evaluation uses the env's 0.1 m
-
-
-@pytest.mark.parametrize(
-    "flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum", "--radius-curriculum"]
-)
+@pytest.mark.parametrize("flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum"])
 def test_json_flags_refuse_what_is_not_a_json_object(flag: str, capsys) -> None:
     from train.leaders import main as leaders_main
 

@@ -50,7 +50,6 @@ __all__ = [
     "ALGO_DEFAULTS",
     "POLICY_DEFAULTS",
     "TRAIN_SEED_OFFSET",
-    "RadiusCurriculum",
     "RangeCurriculum",
     "ResidualVecEnv",
     "load_config",
@@ -88,7 +87,6 @@ SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
 CONFIG_KEYS = (
     "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
     "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum", "action_mode", "central_critic",
-    "radius_curriculum",
 )  # fmt: skip
 
 
@@ -252,39 +250,7 @@ class ToleranceCurriculum(BaseCallback):
         self.scenario.goal_tol, self.scenario.formation_tol = self.final
 
 
-class _Ramp(BaseCallback):
-    """A training setting moved linearly from its start to its final value: held at the start until ``begin`` of
-    the training timesteps (a fraction), at the final value from ``fraction`` of them on. Subclasses set it in
-    :meth:`_set`, given the share of the way left (1 at the start, 0 at the final value)."""
-
-    def __init__(self, what: str, fraction: float, total: int, begin: float) -> None:
-        super().__init__()
-        if not 0.0 < fraction <= 1.0:
-            raise ValueError(f"{what}: fraction must be in (0, 1], got {fraction}")
-        if not 0.0 <= begin < fraction:
-            raise ValueError(f"{what}: begin must be in [0, fraction) = [0, {fraction}), got {begin}")
-        self.first = int(begin * total)
-        self.span = max(1, int(fraction * total) - self.first)
-
-    @staticmethod
-    def recipe_args(what: str, recipe: dict[str, Any], key: str) -> tuple[Any, float, float]:
-        """(``recipe[key]``, fraction, begin) of a recipe's mapping ``{key, fraction[, begin]}``."""
-        if set(recipe) - {key, "fraction", "begin"} or not {key, "fraction"} <= set(recipe):
-            raise ValueError(f"{what}: give {key}, fraction and optionally begin, got {sorted(recipe)}")
-        return recipe[key], float(recipe["fraction"]), float(recipe.get("begin", 0.0))
-
-    def _set(self, left: float) -> None:
-        raise NotImplementedError
-
-    def _on_step(self) -> bool:
-        self._set(min(1.0, max(0.0, 1.0 - (self.num_timesteps - self.first) / self.span)))
-        return True
-
-    def _on_training_end(self) -> None:
-        self._set(0.0)
-
-
-class RangeCurriculum(_Ramp):
+class RangeCurriculum(BaseCallback):
     """A curriculum on a scenario's episode draws: each named range (e.g. ``gap_width``) starts at the given
     (lo, hi), stays there until ``begin`` of the training timesteps (a fraction, default 0) and moves linearly
     to the scenario's own until ``fraction`` of them, in the one engine of the ``FormationVecEnv``. Evaluation
@@ -297,19 +263,26 @@ class RangeCurriculum(_Ramp):
     def __init__(
         self, engine: Any, start: dict[str, Sequence[float]], fraction: float, total: int, begin: float = 0.0
     ) -> None:
-        super().__init__("range curriculum", fraction, total, begin)
+        super().__init__()
+        if not 0.0 < fraction <= 1.0:
+            raise ValueError(f"range curriculum: fraction must be in (0, 1], got {fraction}")
+        if not 0.0 <= begin < fraction:
+            raise ValueError(f"range curriculum: begin must be in [0, fraction) = [0, {fraction}), got {begin}")
         self.scenario = sc = engine.scenario
         for key, rng in start.items():
             if not isinstance(getattr(sc, key, None), tuple) or len(rng) != 2:
                 raise ValueError(f"range curriculum: {key!r} is not a (lo, hi) range of {sc.name!r}")
         self.final = {k: tuple(getattr(sc, k)) for k in start}
         self.start = {k: (float(v[0]), float(v[1])) for k, v in start.items()}
+        self.first = int(begin * total)
+        self.span = max(1, int(fraction * total) - self.first)
 
     @classmethod
     def from_recipe(cls, engine: Any, recipe: dict[str, Any], total: int) -> RangeCurriculum:
         """From a recipe's ``range_curriculum`` mapping: ``start``, ``fraction`` and optionally ``begin``."""
-        start, fraction, begin = cls.recipe_args("range curriculum", recipe, "start")
-        return cls(engine, start, fraction, total, begin)
+        if set(recipe) - {"start", "fraction", "begin"} or not {"start", "fraction"} <= set(recipe):
+            raise ValueError(f"range curriculum: give start, fraction and optionally begin, got {sorted(recipe)}")
+        return cls(engine, recipe["start"], float(recipe["fraction"]), total, float(recipe.get("begin", 0.0)))
 
     def _set(self, left: float) -> None:
         for k, (a0, a1) in self.start.items():
@@ -317,29 +290,12 @@ class RangeCurriculum(_Ramp):
             setattr(self.scenario, k, (b0 + left * (a0 - b0), b1 + left * (a1 - b1)))
             self.scenario.__dict__.pop("_plan", None)  # the draws read the ranges when the plan is built
 
+    def _on_step(self) -> bool:
+        self._set(min(1.0, max(0.0, 1.0 - (self.num_timesteps - self.first) / self.span)))
+        return True
 
-class RadiusCurriculum(_Ramp):
-    """A safety margin learned late: the agents' radius (contacts, clearances) stays the training env's
-    ``agent_radius`` until ``begin`` of the training timesteps and grows linearly to ``end`` (m) until ``fraction``
-    of them (:meth:`Engine.set_agent_radius`). Evaluation uses the env's radius (0.1 m by default), whatever the
-    training's."""
-
-    def __init__(self, engine: Any, end: float, fraction: float, total: int, begin: float = 0.0) -> None:
-        super().__init__("radius curriculum", fraction, total, begin)
-        if not (isinstance(end, int | float) and 0.0 <= end):
-            raise ValueError(f"radius curriculum: end must be a radius >= 0 (m), got {end!r}")
-        self.engine, self.start, self.end = engine, float(engine.agent_radius), float(end)
-
-    @classmethod
-    def from_recipe(cls, engine: Any, recipe: dict[str, Any], total: int) -> RadiusCurriculum:
-        """From a recipe's ``radius_curriculum`` mapping: ``end``, ``fraction`` and optionally ``begin``."""
-        end, fraction, begin = cls.recipe_args("radius curriculum", recipe, "end")
-        return cls(engine, end, fraction, total, begin)
-
-    def _set(self, left: float) -> None:
-        radius = self.start if left >= 1.0 else self.end + left * (self.start - self.end)
-        if radius != self.engine.agent_radius:  # until ``begin`` the run is the one without the curriculum
-            self.engine.set_agent_radius(radius)
+    def _on_training_end(self) -> None:
+        self._set(0.0)
 
 
 def plot_curve(rows: Sequence[tuple[int, float, float, float]], path: Path, title: str) -> Path:
@@ -394,7 +350,6 @@ def train(
     range_curriculum: dict[str, Any] | None = None,
     action_mode: str = "leaders",
     central_critic: bool = False,
-    radius_curriculum: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -414,9 +369,6 @@ def train(
         range_curriculum: ``{"start": {range name: [lo, hi]}, "fraction": f, "begin": b}``: those episode draws
             start at the given ranges, stay there until ``b`` of the timesteps (optional, default 0) and reach the
             scenario's own after ``f`` of them (:class:`RangeCurriculum`).
-        radius_curriculum: ``{"end": r, "fraction": f, "begin": b}``: the agents' radius stays the env's until
-            ``b`` of the timesteps and grows to ``r`` (m) after ``f`` of them (:class:`RadiusCurriculum`): a
-            training margin, learned once the task is.
         env_version: the env version whose defaults ``env_kwargs`` sit over (:mod:`formation_env.env.versions`;
             1 is ``formation_v1``).
         central_critic: (shared PPO) the critic reads the global state too, the actor only the leader's own
@@ -485,8 +437,6 @@ def train(
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:
         callbacks.append(RangeCurriculum.from_recipe(base.engine, range_curriculum, int(timesteps)))
-    if radius_curriculum is not None:
-        callbacks.append(RadiusCurriculum.from_recipe(base.engine, radius_curriculum, int(timesteps)))
     model.learn(int(timesteps), callback=CallbackList(callbacks), progress_bar=progress_bar, tb_log_name=name)
     wall = time.time() - t0
     stem = out / name
@@ -505,7 +455,6 @@ def train(
         "residual": float(residual),
         "curriculum": None if curriculum is None else list(curriculum),
         "range_curriculum": range_curriculum,
-        "radius_curriculum": radius_curriculum,
         "env_version": int(env_version),
         "env_kwargs": env_kwargs,
         "observation": "global_state" if mode == "commander" else "leader_observation",
@@ -574,11 +523,6 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         help='episode-draw curriculum over the recipe\'s, e.g. {"start": {"gap_width": [2.4, 3.0]}, "fraction": 0.5}; '
         '"begin": b holds the start ranges until b of training',
     )  # fmt: skip
-    p.add_argument(
-        "--radius-curriculum", default="", metavar="JSON",
-        help='agents\' radius curriculum over the recipe\'s, e.g. {"end": 0.12, "begin": 0.3, "fraction": 0.5}: '
-        "from the env's agent_radius to end (m)",
-    )  # fmt: skip
     p.add_argument("--env-version", type=int, default=None, help="env version of the defaults (0, 1); default 0")
     p.add_argument(
         "--central-critic", action="store_true", default=None,
@@ -609,8 +553,6 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         cfg["policy_kwargs"] = {**cfg.get("policy_kwargs", {}), **_json_flag(p, "--policy-kwargs", a.policy_kwargs)}
     if a.range_curriculum:
         cfg["range_curriculum"] = _json_flag(p, "--range-curriculum", a.range_curriculum)
-    if a.radius_curriculum:
-        cfg["radius_curriculum"] = _json_flag(p, "--radius-curriculum", a.radius_curriculum)
     if a.curriculum:
         cur = tuple(float(v) for v in a.curriculum.split(":"))
         if len(cur) != 2:

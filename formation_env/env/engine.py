@@ -398,13 +398,6 @@ class Engine:
             )  # fmt: skip
         return self._consts, mod
 
-    def set_agent_radius(self, agent_radius: float) -> None:
-        """The agents' disc radius (m) from the next step on: contacts, clearances, the route and the episode draws
-        use it (a trainer's safety margin, :class:`train.leaders.RadiusCurriculum`)."""
-        check_number("agent_radius", agent_radius, positive=False)
-        self.agent_radius = self.scenario.agent_radius = float(agent_radius)
-        self._consts = None
-
     def _noise(self, B: int, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> Array:
         """Observation noise (B, n_l, obs_dim) drawn from ``rng`` (or one generator per env), or none."""
         if self.observer.noise <= 0.0 or rng is None:

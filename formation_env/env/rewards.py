@@ -20,7 +20,6 @@ from numpy.typing import NDArray
 
 from ._numba import jit
 from .kernel import FLAG_AT_GOAL, FLAG_COLLISION, FLAG_SUCCESS
-from .obstacles import point_clearance
 
 Array = NDArray[np.float64]
 Bools = NDArray[np.bool_]
@@ -150,22 +149,6 @@ def _proximity(b: int, out: Array, w: float, dt: float, clear: Array) -> None:  
     v = dt * min(max(1.0 - clear[b] / PROXIMITY_MARGIN, 0.0), 1.0)
     for i in range(out.shape[0]):
         out[i] -= w * v
-
-
-@reward_term(
-    "own_proximity",
-    0.0,
-    "-T max(0, 1 - c_i / 0.3 m), c_i the gap between the leader's own disc and the nearest obstacle surface: "
-    "``proximity``'s warning, charged to the leader that is close (credit for decentralised leaders)",
-)
-def _own_proximity(  # pragma: no cover
-    b: int, out: Array, w: float, dt: float, leaders: NDArray[np.int64], pos: Array, radius: float,
-    cur_a: Array, cur_e: Array, cur_r: Array,
-) -> None:  # fmt: skip
-    for i in range(out.shape[0]):
-        ag = leaders[i]
-        c = point_clearance(pos[b, ag : ag + 1], cur_a[b], cur_e[b], cur_r[b]) - radius
-        out[i] -= w * dt * min(max(1.0 - c / PROXIMITY_MARGIN, 0.0), 1.0)
 
 
 @reward_term("success", 10.0, "+1 on success")

@@ -312,7 +312,7 @@ def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:
         RangeCurriculum.from_recipe(eng, {"strat": {}, "fraction": 0.5}, 1000)
 
 
-@pytest.mark.parametrize("flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum"])
+@pytest.mark.parametrize("flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum", "--select"])
 def test_json_flags_refuse_what_is_not_a_json_object(flag: str, capsys) -> None:
     from train.leaders import main as leaders_main
 
@@ -338,3 +338,41 @@ def test_linear_schedule_strings_become_schedules_and_others_are_refused() -> No
     for bad in ("exp_3e-4", "lin_fast", "3e-4", "lin_3e-4_from_1", "lin_3e-4_from_-0.1", "lin_3e-4_0.5"):
         with pytest.raises(ValueError, match="learning_rate"):
             schedules({"learning_rate": bad})
+
+
+@pytest.mark.slow
+def test_selection_makes_the_best_validated_checkpoint_the_policy(tmp_path: Path, monkeypatch) -> None:
+    import train.evaluate as ev
+    from train.select import VALIDATION_SEED, select_checkpoint
+
+    train("ppo", "shared", "narrow_passage", 1024, seed=0, out=tmp_path, smoke=True, n_envs=2, checkpoints=4)
+    stem = tmp_path / "narrow_passage_shared"
+    final = Path(f"{stem}.zip").read_bytes()
+    # Scripted validation: the candidates (checkpoints from half the run on, then the final weights) score
+    # 0.5, 0.9, 0.9 (more collisions), 0.2 ...: the second must be chosen.
+    seen: list[tuple[int, int]] = []
+    scores = iter([(0.5, 0.5), (0.9, 0.05), (0.9, 0.1), (0.2, 0.8), (0.1, 0.9)])
+
+    def scripted(path: str, scenario: str, episodes: int, seed: int, **kw) -> dict:
+        seen.append((episodes, seed))
+        s, c = next(scores)
+        return {"metrics": {"success_rate": s, "collision_rate": c, "time_to_goal": float("nan")}}
+
+    monkeypatch.setattr(ev, "evaluate", scripted)
+    rec = select_checkpoint(tmp_path, episodes=7, start=0.5)
+    steps = [c["steps"] for c in rec["candidates"]]
+    assert steps[-1] is None and all(s >= 512 for s in steps[:-1]) and steps[:-1] == sorted(steps[:-1])
+    assert seen == [(7, VALIDATION_SEED)] * len(steps)
+    assert rec["chosen_steps"] == steps[1]
+    chosen = tmp_path / "checkpoints" / f"narrow_passage_shared_{steps[1]}_steps.zip"
+    assert Path(f"{stem}.zip").read_bytes() == chosen.read_bytes() != final
+    assert Path(f"{stem}_last.zip").read_bytes() == final
+    assert LearnedPolicy.load(f"{stem}.zip").config["selection"]["chosen_steps"] == steps[1]
+
+
+def test_selection_and_checkpoint_arguments_are_checked_before_training(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match=r"select: give episodes and start \(both optional\), got \['episode'\]"):
+        train("ppo", "shared", out=tmp_path, smoke=True, select={"episode": 10})
+    with pytest.raises(ValueError, match="checkpoints must be >= 1, got 0"):
+        train("ppo", "shared", out=tmp_path, smoke=True, checkpoints=0)
+    assert not (tmp_path / "tb").exists()

@@ -14,7 +14,9 @@ action = clip(planner + S * policy, -1, 1) (the planner reads the engine state o
 Outputs in ``--out`` (``<name>`` = ``<scenario>_<mode>``): ``<name>.zip``, ``<name>_vecnormalize.pkl``
 and ``<name>_config.json`` side by side (what :class:`agents.policy.LearnedPolicy` loads),
 ``checkpoints/`` (CheckpointCallback), ``tb/`` (TensorBoard), ``curve.csv`` and ``curve.png``
-(training curve: episode return and success rate against timesteps), ``eval.json``.
+(training curve: episode return and success rate against timesteps), ``eval.json``. With ``--select``, the
+policy is chosen among the checkpoints on validation seeds (:mod:`train.select`): ``<name>.zip`` is the chosen
+one, ``<name>_last.zip`` the final weights, ``selection.json`` every candidate's validation metrics.
 
 Reproducibility: the same ``--seed`` gives the same weights (torch on one thread; the vector env
 seeds copy i with ``TRAIN_SEED_OFFSET`` + seed + i, away from the evaluation seeds; PPO/SAC seeded).

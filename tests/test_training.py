@@ -103,7 +103,7 @@ def test_central_critic_actor_reads_only_the_leaders_observation(tmp_path: Path)
 def test_same_seed_same_weights(tmp_path: Path) -> None:
     kw = {"smoke": True, "n_envs": 2, "residual": 0.5, "eval_episodes": 1}
     train("ppo", "commander", "narrow_passage", 256, seed=7, out=tmp_path / "a", **kw)
-    train("ppo", "commander", "narrow_passage", 256, seed=7, out=tmp_path / "b", **kw)
+    train("ppo", "commander", "narrow_passage", 256, seed=7, out=tmp_path / "b", checkpoints=8, **kw)
     train("ppo", "commander", "narrow_passage", 256, seed=8, out=tmp_path / "c", **kw)
     wa = _weights(tmp_path / "a" / "narrow_passage_commander.zip")
     wb = _weights(tmp_path / "b" / "narrow_passage_commander.zip")
@@ -111,6 +111,9 @@ def test_same_seed_same_weights(tmp_path: Path) -> None:
     for x, y in zip(wa, wb, strict=True):
         np.testing.assert_array_equal(x, y)
     assert any(not np.array_equal(x, y) for x, y in zip(wa, wc, strict=True))
+    # the checkpoints saved (4 by default, 8 in "b") do not change the weights
+    assert len(list((tmp_path / "a" / "checkpoints").glob("*_steps.zip"))) == 4
+    assert len(list((tmp_path / "b" / "checkpoints").glob("*_steps.zip"))) == 8
 
 
 @pytest.mark.slow
@@ -312,7 +315,7 @@ def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:
         RangeCurriculum.from_recipe(eng, {"strat": {}, "fraction": 0.5}, 1000)
 
 
-@pytest.mark.parametrize("flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum", "--select"])
+@pytest.mark.parametrize("flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum"])
 def test_json_flags_refuse_what_is_not_a_json_object(flag: str, capsys) -> None:
     from train.leaders import main as leaders_main
 
@@ -340,39 +343,7 @@ def test_linear_schedule_strings_become_schedules_and_others_are_refused() -> No
             schedules({"learning_rate": bad})
 
 
-@pytest.mark.slow
-def test_selection_makes_the_best_validated_checkpoint_the_policy(tmp_path: Path, monkeypatch) -> None:
-    import train.evaluate as ev
-    from train.select import VALIDATION_SEED, select_checkpoint
-
-    train("ppo", "shared", "narrow_passage", 1024, seed=0, out=tmp_path, smoke=True, n_envs=2, checkpoints=4)
-    stem = tmp_path / "narrow_passage_shared"
-    final = Path(f"{stem}.zip").read_bytes()
-    # Scripted validation: the candidates (checkpoints from half the run on, then the final weights) score
-    # 0.5, 0.9, 0.9 (more collisions), 0.2 ...: the second must be chosen.
-    seen: list[tuple[int, int]] = []
-    scores = iter([(0.5, 0.5), (0.9, 0.05), (0.9, 0.1), (0.2, 0.8), (0.1, 0.9)])
-
-    def scripted(path: str, scenario: str, episodes: int, seed: int, **kw) -> dict:
-        seen.append((episodes, seed))
-        s, c = next(scores)
-        return {"metrics": {"success_rate": s, "collision_rate": c, "time_to_goal": float("nan")}}
-
-    monkeypatch.setattr(ev, "evaluate", scripted)
-    rec = select_checkpoint(tmp_path, episodes=7, start=0.5)
-    steps = [c["steps"] for c in rec["candidates"]]
-    assert steps[-1] is None and all(s >= 512 for s in steps[:-1]) and steps[:-1] == sorted(steps[:-1])
-    assert seen == [(7, VALIDATION_SEED)] * len(steps)
-    assert rec["chosen_steps"] == steps[1]
-    chosen = tmp_path / "checkpoints" / f"narrow_passage_shared_{steps[1]}_steps.zip"
-    assert Path(f"{stem}.zip").read_bytes() == chosen.read_bytes() != final
-    assert Path(f"{stem}_last.zip").read_bytes() == final
-    assert LearnedPolicy.load(f"{stem}.zip").config["selection"]["chosen_steps"] == steps[1]
-
-
-def test_selection_and_checkpoint_arguments_are_checked_before_training(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match=r"select: give episodes and start \(both optional\), got \['episode'\]"):
-        train("ppo", "shared", out=tmp_path, smoke=True, select={"episode": 10})
+def test_checkpoint_count_is_checked_before_training(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match="checkpoints must be >= 1, got 0"):
         train("ppo", "shared", out=tmp_path, smoke=True, checkpoints=0)
     assert not (tmp_path / "tb").exists()

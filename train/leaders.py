@@ -14,9 +14,7 @@ action = clip(planner + S * policy, -1, 1) (the planner reads the engine state o
 Outputs in ``--out`` (``<name>`` = ``<scenario>_<mode>``): ``<name>.zip``, ``<name>_vecnormalize.pkl``
 and ``<name>_config.json`` side by side (what :class:`agents.policy.LearnedPolicy` loads),
 ``checkpoints/`` (CheckpointCallback), ``tb/`` (TensorBoard), ``curve.csv`` and ``curve.png``
-(training curve: episode return and success rate against timesteps), ``eval.json``. With ``--select``, the
-policy is chosen among the checkpoints on validation seeds (:mod:`train.select`): ``<name>.zip`` is the chosen
-one, ``<name>_last.zip`` the final weights, ``selection.json`` every candidate's validation metrics.
+(training curve: episode return and success rate against timesteps), ``eval.json``.
 
 Reproducibility: the same ``--seed`` gives the same weights (torch on one thread; the vector env
 seeds copy i with ``TRAIN_SEED_OFFSET`` + seed + i, away from the evaluation seeds; PPO/SAC seeded).
@@ -89,7 +87,7 @@ SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
 CONFIG_KEYS = (
     "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
     "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum", "action_mode", "central_critic",
-    "checkpoints", "select",
+    "checkpoints",
 )  # fmt: skip
 
 
@@ -354,7 +352,6 @@ def train(
     action_mode: str = "leaders",
     central_critic: bool = False,
     checkpoints: int = 4,
-    select: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -379,9 +376,6 @@ def train(
         central_critic: (shared PPO) the critic reads the global state too, the actor only the leader's own
             observation (MAPPO's split, :class:`agents.central_critic.LocalActorPolicy`).
         checkpoints: how many checkpoints to save in ``checkpoints/``, evenly spaced over the run.
-        select: ``{"episodes": n, "start": f}`` (both optional): after training, the checkpoint from ``f`` of the
-            run on (or the final weights) with the best success on ``n`` validation episodes becomes
-            ``<name>.zip`` (:func:`train.select.select_checkpoint`; the final weights stay as ``<name>_last``).
     """
     import numba
     import torch
@@ -401,8 +395,6 @@ def train(
         n_envs = min(n_envs, 4)
     name = name or f"{scenario}_{mode}"
     t0 = time.time()
-    if select is not None and set(select) - {"episodes", "start"}:
-        raise ValueError(f"select: give episodes and start (both optional), got {sorted(select)}")
     if int(checkpoints) < 1:
         raise ValueError(f"checkpoints must be >= 1, got {checkpoints}")
     if central_critic and algo != "ppo":
@@ -477,7 +469,6 @@ def train(
         "sb3_policy_kwargs": pk,
         "config_file": config_file,
         "checkpoints": int(checkpoints),
-        "select": select,
     }
     (out / f"{name}_config.json").write_text(json.dumps(config, indent=2))
     with open(out / "curve.csv", "w", newline="") as fh:
@@ -487,10 +478,6 @@ def train(
     if curve.rows:
         plot_curve(curve.rows, out / "curve.png", f"{algo} {mode} {scenario}, seed {seed}")
     venv.close()
-    if select is not None:
-        from train.select import select_checkpoint
-
-        config["selection"] = select_checkpoint(out, name, **{**select, **({"episodes": 2} if smoke else {})})
     from train.evaluate import evaluate
 
     n_eval = eval_episodes if eval_episodes is not None else (2 if smoke else 50)
@@ -548,11 +535,6 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         help="shared PPO: the critic also reads the global state, the actor only the leader's observation (MAPPO)",
     )  # fmt: skip
     p.add_argument("--checkpoints", type=int, default=None, help="checkpoints saved over the run; default 4")
-    p.add_argument(
-        "--select", default="", metavar="JSON",
-        help='choose the policy among the checkpoints on validation episodes (train.select), e.g. '
-        '{"episodes": 200, "start": 0.5}; {} for the defaults',
-    )  # fmt: skip
     p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
     p.add_argument(
         "--curriculum",
@@ -576,8 +558,6 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         cfg["algo_kwargs"] = {**cfg.get("algo_kwargs", {}), **_json_flag(p, "--algo-kwargs", a.algo_kwargs)}
     if a.policy_kwargs:
         cfg["policy_kwargs"] = {**cfg.get("policy_kwargs", {}), **_json_flag(p, "--policy-kwargs", a.policy_kwargs)}
-    if a.select:
-        cfg["select"] = _json_flag(p, "--select", a.select)
     if a.range_curriculum:
         cfg["range_curriculum"] = _json_flag(p, "--range-curriculum", a.range_curriculum)
     if a.curriculum:

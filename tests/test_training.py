@@ -344,6 +344,8 @@ def test_linear_schedule_strings_become_schedules_and_others_are_refused() -> No
 
 
 def test_checkpoint_count_is_checked_before_training(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="checkpoints must be >= 1, got 0"):
+    with pytest.raises(ValueError, match="checkpoints must be an integer >= 1, got 0"):
         train("ppo", "shared", out=tmp_path, smoke=True, checkpoints=0)
+    with pytest.raises(ValueError, match=r"checkpoints must be an integer >= 1, got 2\.5"):
+        train("ppo", "shared", out=tmp_path, smoke=True, checkpoints=2.5)  # type: ignore[arg-type]
     assert not (tmp_path / "tb").exists()

@@ -395,8 +395,8 @@ def train(
         n_envs = min(n_envs, 4)
     name = name or f"{scenario}_{mode}"
     t0 = time.time()
-    if int(checkpoints) < 1:
-        raise ValueError(f"checkpoints must be >= 1, got {checkpoints}")
+    if not isinstance(checkpoints, int) or checkpoints < 1:
+        raise ValueError(f"checkpoints must be an integer >= 1, got {checkpoints!r}")
     if central_critic and algo != "ppo":
         raise ValueError("central_critic is for PPO only")
     raw = make_venv(mode, scenario, n_envs, TRAIN_SEED_OFFSET + seed, env_kwargs, residual, action_mode, central_critic)
@@ -430,7 +430,7 @@ def train(
     )
     curve = CurveCallback()
     ckpt = CheckpointCallback(
-        save_freq=max(int(timesteps) // (int(checkpoints) * venv.num_envs), 1),
+        save_freq=max(int(timesteps) // (checkpoints * venv.num_envs), 1),
         save_path=str(out / "checkpoints"),
         name_prefix=name,
         save_vecnormalize=True,
@@ -468,7 +468,7 @@ def train(
         "algo_kwargs": hp,
         "sb3_policy_kwargs": pk,
         "config_file": config_file,
-        "checkpoints": int(checkpoints),
+        "checkpoints": checkpoints,
     }
     (out / f"{name}_config.json").write_text(json.dumps(config, indent=2))
     with open(out / "curve.csv", "w", newline="") as fh:

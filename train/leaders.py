@@ -42,12 +42,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-
-# Idle OpenMP threads sleep instead of spinning: torch's and numba's thread pools (both OpenMP) take turns in
-# a training step, and a pool spinning after its work holds a core the other needs (measured: a narrow_passage
-# commander run 1.9x slower on two cores; docs/learning.md). Before torch is loaded; a user's own setting wins.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
-
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor, VecNormalize
 
@@ -114,29 +108,6 @@ def set_threads(threads: int) -> None:
 
     torch.set_num_threads(threads)
     numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
-
-
-class UpdateThreads(BaseCallback):
-    """torch on one thread while collecting rollouts, on ``threads`` for the update. A rollout step's forward pass
-    is a few small matrix products, for which a second thread costs more in hand-over than it saves (measured:
-    docs/learning.md); the env's compiled step keeps its own ``threads`` throughout."""
-
-    def __init__(self, threads: int) -> None:
-        super().__init__()
-        self.threads = threads
-
-    def _on_rollout_start(self) -> None:
-        import torch
-
-        torch.set_num_threads(1)
-
-    def _on_rollout_end(self) -> None:
-        import torch
-
-        torch.set_num_threads(self.threads)
-
-    def _on_step(self) -> bool:
-        return True
 
 
 def machine() -> dict[str, Any]:
@@ -505,7 +476,7 @@ def train(
     )
     if progress_bar is None:
         progress_bar = sys.stdout.isatty() and not smoke
-    callbacks: list[BaseCallback] = [curve, ckpt, UpdateThreads(threads)]
+    callbacks: list[BaseCallback] = [curve, ckpt]
     if curriculum is not None:
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:

@@ -168,7 +168,8 @@ def simulate(
         return_result: return a :class:`SimResult` instead of the positions.
         check: validate omega (:func:`~formation_env.core.stress.check_partition`: symmetric,
             zero row sums, Omega_ff positive definite) at ``rtol``; ``check=False`` skips it.
-        rtol: relative tolerance of that check.
+        rtol: relative tolerance of that check (``1e-3`` accepts a rounded matrix such as the paper's printed
+            one, ``paper_omega(exact=False)``).
         **params: law parameters (gain, eps, K, Q, rounds), see ``make_law``.
 
     Returns:

@@ -34,7 +34,17 @@ from formation_env.env.maneuver import Pose, PoseCommand
 
 from .planner import make_planner
 
-__all__ = ["POLICY_DIR", "AnalyticPolicy", "LearnedPolicy", "Policy", "RLlibPolicy", "RandomPolicy", "load_policy"]
+__all__ = [
+    "POLICY_DIR",
+    "SB3_ZIP_ENTRIES",
+    "AnalyticPolicy",
+    "LearnedPolicy",
+    "Policy",
+    "RLlibPolicy",
+    "RandomPolicy",
+    "check_sb3_zip",
+    "load_policy",
+]
 
 Array = NDArray[np.float64]
 
@@ -50,6 +60,34 @@ def _engine_of(env: Any) -> Engine:
     if not isinstance(eng, Engine):
         raise TypeError(f"expected an Engine or an env with an .engine (formation_v0), got {type(env).__name__}")
     return eng
+
+
+#: The entries of an SB3 save (``model.save``) that loading needs: the model's class, spaces and hyperparameters
+#: (``data``, JSON) and the policy network's weights (``policy.pth``).
+SB3_ZIP_ENTRIES: dict[str, str] = {
+    "data": "the model's class, spaces and hyperparameters",
+    "policy.pth": "the policy network's weights",
+}
+
+
+def check_sb3_zip(path: Path) -> None:
+    """Refuse a file that is not a saved SB3 model, naming what it misses (instead of SB3's bare assertion).
+
+    Raises:
+        ValueError: ``path`` is not a zip archive, or lacks an entry of :data:`SB3_ZIP_ENTRIES`.
+    """
+    import zipfile
+
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"{path} is not a saved SB3 model: not a zip archive (model.save() writes one)")
+    with zipfile.ZipFile(path) as zf:
+        names = set(zf.namelist())
+    missing = [f"{name!r} ({what})" for name, what in SB3_ZIP_ENTRIES.items() if name not in names]
+    if missing:
+        held = ", ".join(sorted(names)[:8]) + (", ..." if len(names) > 8 else "") if names else "nothing"
+        raise ValueError(
+            f"{path} holds no SB3 model: it lacks {' and '.join(missing)}; it holds {held} (model.save() writes both)"
+        )
 
 
 class Policy:
@@ -204,6 +242,7 @@ class LearnedPolicy(TrainedPolicy):
         zp, vp, cp = cls.paths(path)
         if not zp.exists():
             raise FileNotFoundError(f"no saved model at {zp}")
+        check_sb3_zip(zp)
         config = json.loads(cp.read_text()) if cp.exists() else {}
         algos: dict[str, Any] = {"ppo": PPO, "sac": SAC}
         algo = algos[str(config.get("algo", "ppo"))]

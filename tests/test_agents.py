@@ -100,6 +100,32 @@ def test_learned_policy_missing_file_raises(tmp_path) -> None:
         LearnedPolicy.load(tmp_path / "none.zip")
 
 
+def test_a_zip_without_a_model_is_refused_naming_what_it_misses(tmp_path, capsys) -> None:
+    """A zip holding no SB3 model (or not a zip at all) is refused naming the missing entries, not with SB3's
+    bare ``AssertionError: No data found in the saved file``; through the CLI: one line, exit 2."""
+    import zipfile
+
+    from formation_env.cli import main
+
+    empty = tmp_path / "notes.zip"
+    with zipfile.ZipFile(empty, "w") as zf:
+        zf.writestr("readme.txt", "not a model")
+    weights_only = tmp_path / "weights.zip"
+    with zipfile.ZipFile(weights_only, "w") as zf:
+        zf.writestr("policy.pth", b"")
+    text = tmp_path / "text.zip"
+    text.write_text("hello")
+    with pytest.raises(ValueError, match=r"holds no SB3 model: it lacks 'data' \(.*\) and 'policy.pth' \(.*readme.txt"):
+        load_policy(empty, Engine("hold"))
+    with pytest.raises(ValueError, match=r"lacks 'data' \(the model's class, spaces and hyperparameters\); it holds"):
+        LearnedPolicy.load(weights_only)
+    with pytest.raises(ValueError, match="is not a saved SB3 model: not a zip archive"):
+        LearnedPolicy.load(text)
+    assert main(["evaluate", "--policy", str(empty), "--scenario", "hold", "--episodes", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds no SB3 model: it lacks 'data'" in err[0] and "AssertionError" not in err[0]
+
+
 def test_wilson_interval() -> None:
     lo, hi = wilson(10, 10)
     assert hi == 1.0 and 0.69 < lo < 0.73

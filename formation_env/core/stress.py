@@ -286,7 +286,7 @@ def _ldl_inertia(a: sp.spmatrix, rtol: float) -> tuple[int, int, NDArray[np.floa
     return int(np.sum(diag < -tol)), int(np.sum(np.abs(diag) <= tol)), diag
 
 
-def project_stress(omega: ArrayLike, fw: Framework, rtol: float = DEFAULT_RTOL) -> NDArray[np.float64]:
+def project_stress(omega: StressLike, fw: Framework, rtol: float = DEFAULT_RTOL) -> NDArray[np.float64]:
     """Nearest exact equilibrium stress of ``fw`` to ``omega`` in the Frobenius norm.
 
     Projects the edge weights -Omega_ij onto the equilibrium-stress space of the

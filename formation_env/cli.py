@@ -112,7 +112,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_leaderboard(args: argparse.Namespace) -> int:
-    """Every entry (random, analytic, learned) on every scenario's seeded suite; writes docs/leaderboard.md."""
+    """Every entry (random, analytic, learned) on every scenario's seeded suite; writes ``--out``/leaderboard.md
+    (``--project``: the project's own docs/leaderboard.md and README table)."""
     from train.leaderboard import run_cli
 
     return run_cli(args)
@@ -156,7 +157,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("train", add_help=False, help="train leader policies with SB3 (python -m train.leaders)")
     p.set_defaults(func=cmd_train, train_args=[])
     p = sub.add_parser(
-        "leaderboard", formatter_class=fmt, help="every policy on every scenario's suite (docs/leaderboard.md)"
+        "leaderboard", formatter_class=fmt, help="every policy on every scenario's suite (out/leaderboard.md)"
     )
     from train.leaderboard import add_arguments as leaderboard_arguments
 

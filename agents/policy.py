@@ -294,7 +294,7 @@ class LearnedPolicy(TrainedPolicy):
             where = f"the {self._engine.scenario_name!r} engine" if self._engine is not None else "the env"
             raise ValueError(
                 f"the policy takes observations of shape {tuple(want)}, {where} gives {o.shape[-1:]}: evaluate it on "
-                f"its training scenario ({self.config.get('scenario', 'see its config.json')!r}) and sensing arguments"
+                f"its training scenario ({self.config.get('scenario', 'see its config.json')!r}) and arguments"
             )
         if self.vecnorm is not None and getattr(self.vecnorm, "norm_obs", False):
             o = np.asarray(self.vecnorm.normalize_obs(o), dtype=np.float32)
@@ -436,7 +436,7 @@ class RLlibPolicy(TrainedPolicy):
             raise ValueError(
                 f"the RLlib policy takes observations of shape {tuple(want)}, the {engine.scenario_name!r} engine "
                 f"gives ({o.shape[-1]},): evaluate it on its training scenario "
-                f"({self.config.get('scenario', 'see its config.json')!r}) and sensing arguments"
+                f"({self.config.get('scenario', 'see its config.json')!r}) and arguments"
             )
         a = self.act(o.reshape(B * engine.n_l, -1))
         return a.reshape(B, engine.n_l, engine.p).astype(np.float64)

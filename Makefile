@@ -1,6 +1,6 @@
 # Two entry points, each does all the set-up it needs on a fresh machine:
 #   make run   - create .venv, install, run the main job (paper reproduction + report)
-#   make test  - create .venv, install, run the test suite
+#   make test  - create .venv, install, run the test suite, then the linters (make lint: ruff, mypy)
 PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
@@ -24,8 +24,10 @@ setup: $(STAMP)
 run: $(STAMP)
 	$(BIN)/formation-env report --out out
 
+# the linters after the tests: a lint failure fails `make test` (and CI, .ci/run) without hiding the tests' results
 test: $(STAMP)
 	SDL_VIDEODRIVER=dummy $(BIN)/python -m pytest -q
+	$(MAKE) --no-print-directory lint
 
 lint: $(STAMP)
 	$(BIN)/ruff check . && $(BIN)/ruff format --check . && $(BIN)/mypy

@@ -40,6 +40,8 @@ class LocalFeatures(BaseFeaturesExtractor):
         mask[:actor_dim] = 1.0
         self.register_buffer("mask", mask)
 
+    mask: th.Tensor  # (dim,) 1 on the actor's entries, a registered buffer
+
     def forward(self, observations: th.Tensor) -> th.Tensor:
         return th.flatten(observations, start_dim=1) * self.mask
 

@@ -16,6 +16,10 @@ Learned policies come from SB3 (:class:`LearnedPolicy`, a ``.zip`` with its stat
 Analytic planners need the engine state: ``act`` decodes it from the global state (positions,
 velocities, goals, time and scenario parameters are all in it), ``act_parallel`` reads
 ``env.unwrapped.engine`` and ``env.unwrapped.engine_state``; the interface is identical.
+
+:func:`load_policy` resolves a policy spec (``"analytic"``, ``"random"``, a saved model) once: the policy it returns
+knows its scenario and env arguments (``policy.scenario``, ``policy.env_kwargs``: a saved policy's training scenario
+and :data:`POLICY_ENV_KWARGS`) and acts in ``policy.engine``.
 """
 
 from __future__ import annotations
@@ -34,12 +38,42 @@ from formation_env.env.maneuver import Pose, PoseCommand
 
 from .planner import make_planner
 
-__all__ = ["POLICY_DIR", "AnalyticPolicy", "LearnedPolicy", "Policy", "RLlibPolicy", "RandomPolicy", "load_policy"]
+__all__ = [
+    "DEFAULT_SCENARIO",
+    "POLICY_DIR",
+    "POLICY_ENV_KWARGS",
+    "SB3_ZIP_ENTRIES",
+    "AnalyticPolicy",
+    "LearnedPolicy",
+    "Policy",
+    "RLlibPolicy",
+    "RandomPolicy",
+    "check_sb3_zip",
+    "load_policy",
+    "policy_env_kwargs",
+    "saved_config",
+]
 
 Array = NDArray[np.float64]
 
 #: The shipped policies' folder (``agents/pretrained/``).
 POLICY_DIR = Path(__file__).resolve().parent / "pretrained"
+#: The scenario of a policy with none of its own (the analytic and random ones, a saved one without a config).
+DEFAULT_SCENARIO = "narrow_passage"
+#: Engine arguments that set what a saved policy observes and commands: the agents (framework, stress, dynamics,
+#: follower law, sampling), the obstacles' count and the sensing. It acts with its training values of these; its other
+#: training arguments (reward weights, the scenario's draw ranges and tolerances, the agents' radius) are training
+#: choices, and it is evaluated on the scenario's own.
+POLICY_ENV_KWARGS: tuple[str, ...] = (
+    "dynamics", "follower_law", "dt", "framework", "omega", "law_params", "u_max", "max_speed", "n_obstacles",
+    "n_moving", "observation", "state_blocks", "k_nearest", "sense_radius", "obs_noise", "n_rays", "n_nearest",
+    "sensor_range",
+)  # fmt: skip
+
+
+def policy_env_kwargs(config: dict[str, Any]) -> dict[str, Any]:
+    """The :data:`POLICY_ENV_KWARGS` of a saved policy's training ``config`` (its ``env_kwargs``; none without)."""
+    return {k: v for k, v in (config.get("env_kwargs") or {}).items() if k in POLICY_ENV_KWARGS}
 
 
 def _engine_of(env: Any) -> Engine:
@@ -52,11 +86,46 @@ def _engine_of(env: Any) -> Engine:
     return eng
 
 
+#: The entries of an SB3 save (``model.save``) that loading needs: the model's class, spaces and hyperparameters
+#: (``data``, JSON) and the policy network's weights (``policy.pth``).
+SB3_ZIP_ENTRIES: dict[str, str] = {
+    "data": "the model's class, spaces and hyperparameters",
+    "policy.pth": "the policy network's weights",
+}
+
+
+def check_sb3_zip(path: Path) -> None:
+    """Refuse a file that is not a saved SB3 model, naming what it misses (instead of SB3's bare assertion).
+
+    Raises:
+        ValueError: ``path`` is not a zip archive, or lacks an entry of :data:`SB3_ZIP_ENTRIES`.
+    """
+    import zipfile
+
+    if not zipfile.is_zipfile(path):
+        raise ValueError(f"{path} is not a saved SB3 model: not a zip archive (model.save() writes one)")
+    with zipfile.ZipFile(path) as zf:
+        names = set(zf.namelist())
+    missing = [f"{name!r} ({what})" for name, what in SB3_ZIP_ENTRIES.items() if name not in names]
+    if missing:
+        held = ", ".join(sorted(names)[:8]) + (", ..." if len(names) > 8 else "") if names else "nothing"
+        raise ValueError(
+            f"{path} holds no SB3 model: it lacks {' and '.join(missing)}; it holds {held} (model.save() writes both)"
+        )
+
+
 class Policy:
     """Base class: subclasses implement :meth:`act_engine`; ``act`` and ``act_parallel`` follow from it."""
 
     name: str = "policy"
     engine: Engine
+    #: The engine arguments over the scenario's defaults it was made for (:func:`load_policy` sets them).
+    env_kwargs: dict[str, Any] = {}  # replaced per instance, never mutated
+
+    @property
+    def scenario(self) -> str:
+        """The name of the scenario it acts in (its engine's)."""
+        return self.engine.scenario_name
 
     def act_engine(self, engine: Engine, state: EngineState, obs: Any = None) -> Array:
         """Actions (B, n_l, p) in [-1, 1] for the batched ``state``."""
@@ -156,11 +225,10 @@ class TrainedPolicy(Policy):
 
     @property
     def engine(self) -> Engine:  # type: ignore[override]
-        """The engine it acts in (built from the config's scenario and env arguments when not given)."""
+        """The engine it acts in (built from the config's scenario and :data:`POLICY_ENV_KWARGS` when not given)."""
         if self._engine is None:
-            cfg = self.config
-            kw = {k: v for k, v in cfg.get("env_kwargs", {}).items() if k != "maneuver_kwargs"}  # not the engine's
-            self._engine = Engine(str(cfg.get("scenario", "narrow_passage")), **kw)
+            self.env_kwargs = policy_env_kwargs(self.config)
+            self._engine = Engine(str(self.config.get("scenario", DEFAULT_SCENARIO)), **self.env_kwargs)
         return self._engine
 
 
@@ -204,6 +272,7 @@ class LearnedPolicy(TrainedPolicy):
         zp, vp, cp = cls.paths(path)
         if not zp.exists():
             raise FileNotFoundError(f"no saved model at {zp}")
+        check_sb3_zip(zp)
         config = json.loads(cp.read_text()) if cp.exists() else {}
         algos: dict[str, Any] = {"ppo": PPO, "sac": SAC}
         algo = algos[str(config.get("algo", "ppo"))]
@@ -225,7 +294,7 @@ class LearnedPolicy(TrainedPolicy):
             where = f"the {self._engine.scenario_name!r} engine" if self._engine is not None else "the env"
             raise ValueError(
                 f"the policy takes observations of shape {tuple(want)}, {where} gives {o.shape[-1:]}: evaluate it on "
-                f"its training scenario ({self.config.get('scenario', 'see its config.json')!r}) and sensing arguments"
+                f"its training scenario ({self.config.get('scenario', 'see its config.json')!r}) and arguments"
             )
         if self.vecnorm is not None and getattr(self.vecnorm, "norm_obs", False):
             o = np.asarray(self.vecnorm.normalize_obs(o), dtype=np.float32)
@@ -367,27 +436,66 @@ class RLlibPolicy(TrainedPolicy):
             raise ValueError(
                 f"the RLlib policy takes observations of shape {tuple(want)}, the {engine.scenario_name!r} engine "
                 f"gives ({o.shape[-1]},): evaluate it on its training scenario "
-                f"({self.config.get('scenario', 'see its config.json')!r}) and sensing arguments"
+                f"({self.config.get('scenario', 'see its config.json')!r}) and arguments"
             )
         a = self.act(o.reshape(B * engine.n_l, -1))
         return a.reshape(B, engine.n_l, engine.p).astype(np.float64)
 
 
-def load_policy(spec: str | Path | Policy, env: Engine | Any) -> Policy:
-    """``"analytic"`` -> :class:`AnalyticPolicy`; ``"random"`` -> :class:`RandomPolicy` (seed 0); an RLlib
-    checkpoint folder (or a ``train.rllib`` output folder) -> :class:`RLlibPolicy`; another path ->
-    :class:`LearnedPolicy`; a Policy is returned as is.
+def saved_config(spec: str | Path) -> dict[str, Any]:
+    """The training config of a saved policy spec (an SB3 model's ``<stem>_config.json``, an RLlib run's
+    ``config.json``; ``{}`` for ``"analytic"``, ``"random"`` and a saved policy without one)."""
+    if str(spec) in ("analytic", "random"):
+        return {}
+    if RLlibPolicy.checkpoint_of(spec) is not None:
+        return RLlibPolicy.config_of(spec)
+    cp = LearnedPolicy.paths(spec)[2]
+    return dict(json.loads(cp.read_text())) if cp.is_file() else {}
 
-    ``env``: an :class:`Engine` or a formation_v0 env (the policy acts in its engine).
+
+def load_policy(
+    spec: str | Path | Policy,
+    env: Engine | Any | None = None,
+    *,
+    scenario: str | None = None,
+    env_kwargs: dict[str, Any] | None = None,
+) -> Policy:
+    """The policy of ``spec``, knowing its scenario and env arguments: ``"analytic"`` -> :class:`AnalyticPolicy`;
+    ``"random"`` -> :class:`RandomPolicy` (seed 0); an RLlib checkpoint folder (or a ``train.rllib`` output folder)
+    -> :class:`RLlibPolicy`; another path -> :class:`LearnedPolicy` (``.zip``, or its stem); a Policy is returned as
+    is.
+
+    Args:
+        env: an :class:`Engine` or a formation_v0 env it acts in; None: an engine is built from ``scenario`` and
+            ``env_kwargs``.
+        scenario: default: a saved policy's training scenario, else :data:`DEFAULT_SCENARIO`.
+        env_kwargs: engine arguments; default: a saved policy's training values of :data:`POLICY_ENV_KWARGS`, else
+            none.
+    Returns:
+        The policy; ``policy.engine`` is the engine it acts in, ``policy.scenario`` its scenario and
+        ``policy.env_kwargs`` the arguments that engine was built with (``{}`` when ``env`` was given).
+    Raises:
+        ValueError: ``env`` given with ``scenario`` or ``env_kwargs``.
     """
     if isinstance(spec, Policy):
         return spec
+    if env is not None and (scenario is not None or env_kwargs is not None):
+        raise ValueError("load_policy takes an env to act in, or scenario and env_kwargs to build one, not both")
+    kw: dict[str, Any] = {}
+    if env is None:
+        config = saved_config(spec)
+        kw = dict(env_kwargs) if env_kwargs is not None else policy_env_kwargs(config)
+        env = Engine(scenario if scenario is not None else str(config.get("scenario", DEFAULT_SCENARIO)), **kw)
+    policy: Policy
     if str(spec) == "analytic":
-        return AnalyticPolicy(env)
-    if str(spec) == "random":
-        return RandomPolicy(env)
-    if RLlibPolicy.checkpoint_of(spec) is not None:
-        return RLlibPolicy.load(spec, env)
-    if Path(spec).is_dir():
+        policy = AnalyticPolicy(env)
+    elif str(spec) == "random":
+        policy = RandomPolicy(env)
+    elif RLlibPolicy.checkpoint_of(spec) is not None:
+        policy = RLlibPolicy.load(spec, env)
+    elif Path(spec).is_dir():
         raise FileNotFoundError(f"{spec} is a folder but not an RLlib checkpoint (no rllib_checkpoint.json)")
-    return LearnedPolicy.load(spec, env)
+    else:
+        policy = LearnedPolicy.load(spec, env)
+    policy.env_kwargs = kw
+    return policy

@@ -112,7 +112,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_leaderboard(args: argparse.Namespace) -> int:
-    """Every entry (random, analytic, learned) on every scenario's seeded suite; writes docs/leaderboard.md."""
+    """Every entry (random, analytic, learned) on every scenario's seeded suite; writes ``--out``/leaderboard.md
+    (``--project``: the project's own docs/leaderboard.md and README table)."""
     from train.leaderboard import run_cli
 
     return run_cli(args)
@@ -122,18 +123,20 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="formation-env", description=__doc__)
     parser.add_argument("--debug", action="store_true", help="show the full traceback of an error")
     sub = parser.add_subparsers(dest="command", required=True)
-    fmt = {"formatter_class": argparse.ArgumentDefaultsHelpFormatter}
-    p = sub.add_parser("reproduce", **fmt, help="reproduce the paper's 5-agent example")
+    fmt = argparse.ArgumentDefaultsHelpFormatter
+    p = sub.add_parser("reproduce", formatter_class=fmt, help="reproduce the paper's 5-agent example")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     p.add_argument("--exact", action="store_true", help="use the projected exact stress instead of the printed one")
     p.add_argument("--out", default="out", help="folder for the figure (default: out)")
     p.set_defaults(func=cmd_reproduce)
-    p = sub.add_parser("report", **fmt, help="the main job: reproduction and evaluation report (markdown + figures)")
+    p = sub.add_parser(
+        "report", formatter_class=fmt, help="the main job: reproduction and evaluation report (markdown + figures)"
+    )
     p.add_argument("--out", default="out", help="output folder (default: out)")
     p.add_argument("--quick", action="store_true", help="fewer evaluation episodes")
     add_progress_argument(p)
     p.set_defaults(func=cmd_report)
-    p = sub.add_parser("rollout", **fmt, help="render one episode to a GIF or MP4")
+    p = sub.add_parser("rollout", formatter_class=fmt, help="render one episode to a GIF or MP4")
     from .env.scenarios import REGISTRY
 
     p.add_argument("--scenario", default="narrow_passage", choices=sorted(REGISTRY))
@@ -145,7 +148,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out/rollout.gif", help="output .gif or .mp4")
     p.set_defaults(func=cmd_rollout)
     what = "evaluate a policy on a seeded suite (success, collisions, time to goal)"
-    p = sub.add_parser("evaluate", **fmt, help=what)
+    p = sub.add_parser("evaluate", formatter_class=fmt, help=what)
     from train.evaluate import add_arguments
 
     add_arguments(p)
@@ -153,12 +156,14 @@ def build_parser() -> argparse.ArgumentParser:
     # the flags are train.leaders' own (one parser): everything after `train` goes to it, -h included
     p = sub.add_parser("train", add_help=False, help="train leader policies with SB3 (python -m train.leaders)")
     p.set_defaults(func=cmd_train, train_args=[])
-    p = sub.add_parser("leaderboard", **fmt, help="every policy on every scenario's suite (docs/leaderboard.md)")
+    p = sub.add_parser(
+        "leaderboard", formatter_class=fmt, help="every policy on every scenario's suite (out/leaderboard.md)"
+    )
     from train.leaderboard import add_arguments as leaderboard_arguments
 
     leaderboard_arguments(p)
     p.set_defaults(func=cmd_leaderboard)
-    p = sub.add_parser("bench", **fmt, help="run the benchmarks and write BENCHMARKS.md into a folder")
+    p = sub.add_parser("bench", formatter_class=fmt, help="run the benchmarks and write BENCHMARKS.md into a folder")
     p.add_argument(
         "--only", nargs="*", choices=["core", "design", "env", "conditioning"], help="sections (default: all)"
     )

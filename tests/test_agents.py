@@ -100,6 +100,56 @@ def test_learned_policy_missing_file_raises(tmp_path) -> None:
         LearnedPolicy.load(tmp_path / "none.zip")
 
 
+def test_a_zip_without_a_model_is_refused_naming_what_it_misses(tmp_path, capsys) -> None:
+    """A zip holding no SB3 model (or not a zip at all) is refused naming the missing entries, not with SB3's
+    bare ``AssertionError: No data found in the saved file``; through the CLI: one line, exit 2."""
+    import zipfile
+
+    from formation_env.cli import main
+
+    empty = tmp_path / "notes.zip"
+    with zipfile.ZipFile(empty, "w") as zf:
+        zf.writestr("readme.txt", "not a model")
+    weights_only = tmp_path / "weights.zip"
+    with zipfile.ZipFile(weights_only, "w") as zf:
+        zf.writestr("policy.pth", b"")
+    text = tmp_path / "text.zip"
+    text.write_text("hello")
+    with pytest.raises(ValueError, match=r"holds no SB3 model: it lacks 'data' \(.*\) and 'policy.pth' \(.*readme.txt"):
+        load_policy(empty, Engine("hold"))
+    with pytest.raises(ValueError, match=r"lacks 'data' \(the model's class, spaces and hyperparameters\); it holds"):
+        LearnedPolicy.load(weights_only)
+    with pytest.raises(ValueError, match="is not a saved SB3 model: not a zip archive"):
+        LearnedPolicy.load(text)
+    assert main(["evaluate", "--policy", str(empty), "--scenario", "hold", "--episodes", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "holds no SB3 model: it lacks 'data'" in err[0] and "AssertionError" not in err[0]
+
+
+def test_load_policy_resolves_a_spec_once_into_a_policy_knowing_its_scenario_and_env_arguments() -> None:
+    """``load_policy(spec)`` needs no env: a saved policy gets its training scenario and the training values of the
+    arguments that shape what it observes; the planner and the random policy the default scenario or the given one.
+    ``evaluate`` takes the policy's scenario and arguments when given a policy without them."""
+    from agents.policy import DEFAULT_SCENARIO, POLICY_ENV_KWARGS, saved_config
+
+    spec = "agents/pretrained/narrow_passage_ppo_commander_seed0.zip"
+    pol = load_policy(spec)
+    config = saved_config(spec)
+    assert isinstance(pol, LearnedPolicy) and pol.scenario == config["scenario"] == "narrow_passage"
+    assert pol.env_kwargs == {k: v for k, v in config["env_kwargs"].items() if k in POLICY_ENV_KWARGS}
+    assert "reward_weights" in config["env_kwargs"] and "reward_weights" not in pol.env_kwargs  # training only
+    planner = load_policy("analytic")
+    assert planner.scenario == DEFAULT_SCENARIO and planner.env_kwargs == {}
+    held = load_policy("random", scenario="hold", env_kwargs={"framework": "bipyramid_3d"})
+    assert held.scenario == "hold" and held.engine.d == 3 and held.env_kwargs == {"framework": "bipyramid_3d"}
+    given = load_policy("analytic", Engine("hold"))
+    assert given.scenario == "hold" and given.env_kwargs == {}
+    with pytest.raises(ValueError, match="an env to act in, or scenario and env_kwargs to build one, not both"):
+        load_policy("analytic", Engine("hold"), scenario="hold")
+    res = evaluate(held, None, 2, seed=0, generalisation=False)
+    assert res["scenario"] == "hold" and res["policy"] == "random"
+
+
 def test_wilson_interval() -> None:
     lo, hi = wilson(10, 10)
     assert hi == 1.0 and 0.69 < lo < 0.73

@@ -109,7 +109,7 @@ def test_progress_bars_go_to_stderr_and_keep_json_whole(capsys, tmp_path) -> Non
     assert blob_quiet == blob and "analytic on hold" not in err
     (tmp_path / "none").mkdir()
     lb = ["leaderboard", "--scenarios", "hold", "--episodes", "2", "--policies", str(tmp_path / "none")]
-    board, err = _json_and_bar(capsys, [*lb, "--out", str(tmp_path / "lb.md"), "--json", "--progress"])
+    board, err = _json_and_bar(capsys, [*lb, "--out", str(tmp_path / "lb"), "--json", "--progress"])
     assert set(board["scenarios"]["hold"]) >= {"random", "analytic"} and "/2 " in err and "suite/s" in err
 
 
@@ -129,3 +129,40 @@ def test_progress_bar_shows_on_a_terminal_or_when_asked(capsys) -> None:
             bar.update(3)
     err = capsys.readouterr().err
     assert "bar-True" in err and "bar-None" not in err and "bar-False" not in err
+
+
+def test_leaderboard_writes_into_an_out_folder_and_the_projects_table_is_one_flag_away(
+    tmp_path, monkeypatch, capsys
+) -> None:
+    """By default ``out/leaderboard.md`` under the working folder (no stray ``docs/``); ``--out`` is a folder as
+    everywhere; ``--project`` rewrites the checkout's docs/leaderboard.md and the README's results table."""
+    import json
+
+    from train.leaderboard import leaderboard, summary_table, write_project
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "none").mkdir()
+    lb = ["leaderboard", "--scenarios", "hold", "--episodes", "2", "--policies", str(tmp_path / "none")]
+    assert main([*lb, "--json"]) == 0
+    assert set(json.loads(capsys.readouterr().out)["scenarios"]) == {"hold"}
+    assert (tmp_path / "out" / "leaderboard.md").read_text().startswith("# Leaderboard")
+    assert not (tmp_path / "docs").exists()
+    assert main([*lb, "--out", "lb.md"]) == 2
+    assert "--out is a folder (leaderboard.md is written inside it)" in capsys.readouterr().err
+    assert main([*lb, "--project"]) == 2
+    assert "--project writes the whole table" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["leaderboard", "--project", "--out", "x"])
+    assert exc.value.code == 2 and "not allowed with argument" in capsys.readouterr().err
+
+    board = leaderboard(2, 0, tmp_path / "none", ["hold"])
+    proj = tmp_path / "proj"
+    (proj / "docs").mkdir(parents=True)
+    head = summary_table(board).splitlines()[0]
+    (proj / "README.md").write_text(f"intro\n\n{head}\n|---|\n| hold | stale |\n\nafter\n")
+    written = write_project(board, "# Leaderboard\n", proj)
+    assert written == [proj / "docs" / "leaderboard.md", proj / "README.md"]
+    assert (proj / "docs" / "leaderboard.md").read_text() == "# Leaderboard\n"
+    assert (proj / "README.md").read_text() == f"intro\n\n{summary_table(board)}\n\nafter\n"
+    with pytest.raises(FileNotFoundError, match=r"is not one \(no README.md or docs/ in it\): run from a clone"):
+        write_project(board, "", tmp_path / "none")

@@ -313,6 +313,25 @@ def test_printed_paper_matrix_needs_loose_tolerance():
     np.testing.assert_array_equal(paper_omega(exact=False), PAPER_OMEGA_PRINTED)
 
 
+@pytest.mark.parametrize("call", ["simulate", "stability_report", "follower_targets", "check_stress"])
+def test_printed_paper_matrix_error_names_both_remedies_and_rtol_reaches_the_check(call: str) -> None:
+    """The refusal of the rounded matrix says how to accept it (``rtol=1e-3``) and how to fix it (``project_stress``,
+    ``paper_omega()``); ``rtol=1e-3`` passed to the same call accepts it."""
+    from formation_env.core import simulate, stability_report
+
+    fw = paper_example()
+    om = PAPER_OMEGA_PRINTED
+    calls = {
+        "simulate": lambda **kw: simulate(om, [0, 1, 2], fw.positions, dt=1.0, steps=3, **kw),
+        "stability_report": lambda **kw: stability_report(om, [0, 1, 2], dt=1.0, **kw),
+        "follower_targets": lambda **kw: follower_targets(om, [0, 1, 2], fw.positions[:3], **kw),
+        "check_stress": lambda **kw: check_stress(om, fw, **kw),
+    }
+    with pytest.raises(StressMatrixError, match=r"rows must sum to zero.*rtol=1e-3.*project_stress.*paper_omega\(\)"):
+        calls[call]()
+    calls[call](rtol=1e-3)
+
+
 def test_project_stress_gives_an_exact_stress_with_the_paper_targets():
     fw = paper_example()
     om = project_stress(PAPER_OMEGA_PRINTED, fw)

@@ -184,6 +184,27 @@ def test_vec_env_refuses_complex_actions_and_foreign_objects():
     assert not venv.has_attr("nope")  # SB3's has_attr relies on the AttributeError
 
 
+@pytest.mark.parametrize("make", [formation_v0.parallel_env, formation_v0.env])
+def test_max_cycles_set_on_the_pettingzoo_envs_is_checked_and_reaches_the_engine(make) -> None:
+    """``env.max_cycles = 0`` is refused naming the argument (the AEC wrapper does not keep it to itself); a positive
+    integer set on either view is the episode length the engine truncates at."""
+    env = make(scenario="hold", max_cycles=40)
+    for bad, error in ((0, FormationError), (-3, FormationError), (2.5, FormationError), ("7", TypeError)):
+        with pytest.raises(error, match=r"max_cycles must be a positive integer number of steps"):
+            env.max_cycles = bad
+    assert env.max_cycles == env.unwrapped.engine.max_cycles == 40
+    env.max_cycles = 7
+    assert env.max_cycles == env.unwrapped.max_cycles == env.unwrapped.engine.max_cycles == 7
+    env.reset(seed=0)
+    while env.agents:
+        if hasattr(env, "agent_iter"):
+            env.step(None if env.terminations[env.agent_selection] or env.truncations[env.agent_selection]
+                     else np.zeros(2, np.float32))  # fmt: skip
+        else:
+            env.step({a: np.zeros(2, np.float32) for a in env.agents})
+    assert int(env.unwrapped.engine_state.k[0]) == 7  # truncated after the length set
+
+
 def test_space_lookups_name_the_agent():
     env = formation_v0.parallel_env(scenario="hold")
     with pytest.raises(

@@ -138,3 +138,37 @@ def test_spread_leaders_pick_extremes() -> None:
     assert len(chosen) == 3
     assert set(chosen) <= {0, 1, 2, 3}
     assert len(lib.spread_leaders(square, 4)) == 4
+
+
+def test_named_frameworks_live_in_the_core_with_their_stress() -> None:
+    """``NAMED_FRAMEWORKS`` (name -> (Framework, omega)) is the core's; the env's scenarios re-export the same dict."""
+    from formation_env.env.scenarios import NAMED_FRAMEWORKS as env_named
+
+    assert env_named is lib.NAMED_FRAMEWORKS
+    assert set(lib.NAMED_FRAMEWORKS) == {"paper", "bipyramid_3d"}
+    for name, make in lib.NAMED_FRAMEWORKS.items():
+        fw, omega = make()
+        check_stress(omega, fw)
+        assert fw.name == {"paper": "paper_example"}.get(name, name)
+    fw = lib.bipyramid_3d()
+    np.testing.assert_allclose(lib.gram_stress(fw), lib.NAMED_FRAMEWORKS["bipyramid_3d"]()[1])
+    assert fw.d == 3 and fw.leaders == (0, 1, 2, 3)
+
+
+def test_named_frameworks_import_without_the_env() -> None:
+    """The core stays numpy/scipy only: the named frameworks import without gymnasium, pettingzoo, numba or pygame."""
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    code = (
+        "import json, sys\n"
+        "from formation_env.core.frameworks import NAMED_FRAMEWORKS, bipyramid_3d, gram_stress\n"
+        "NAMED_FRAMEWORKS['bipyramid_3d']()\n"
+        "print(json.dumps([m for m in ('gymnasium', 'pettingzoo', 'numba', 'pygame', 'torch') if m in sys.modules]))\n"
+    )
+    root = Path(__file__).resolve().parents[1]
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, timeout=120)
+    assert res.returncode == 0, res.stderr
+    assert json.loads(res.stdout.strip().splitlines()[-1]) == []

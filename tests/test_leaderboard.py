@@ -148,7 +148,7 @@ def test_recipe_run_is_reproducible_and_the_leaderboard_reads_it(tmp_path: Path,
         )
     from formation_env.cli import main as cli
 
-    md = tmp_path / "lb.md"
+    md = tmp_path / "lb"
     assert (
         cli(
             [
@@ -178,7 +178,7 @@ def test_recipe_run_is_reproducible_and_the_leaderboard_reads_it(tmp_path: Path,
     assert len(rows["ppo_commander"]["time_vs_analytic_ci95"]) == 1  # one interval per seed
     assert rows["ppo_shared"]["metrics"] is None and rows["ppo_residual"]["metrics"] is None
     assert rows["analytic"]["metrics"]["success_rate"] == 1.0
-    assert "## hold" in md.read_text()
+    assert "## hold" in (md / "leaderboard.md").read_text()
 
 
 def test_readme_shows_the_leaderboards_table() -> None:

@@ -148,6 +148,57 @@ def test_3d_projection_draws_something() -> None:
     assert r.depth(np.array([0.0, -1.0, 0.0])) > r.depth(np.array([0.0, 1.0, 0.0]))
 
 
+def _share(r: Renderer, points: np.ndarray) -> float:
+    """The larger of the width and height shares of the picture that ``points`` (k, 3) span on screen."""
+    xy = r.world_to_screen(points)
+    return float(np.max((xy.max(axis=0) - xy.min(axis=0)) / np.array([r.width, r.height])))
+
+
+def _inside(r: Renderer, points: np.ndarray) -> bool:
+    xy = r.world_to_screen(points)
+    return bool(np.all((xy > 0) & (xy < np.array([r.width, r.height]))))
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_3d_camera_frames_the_team_and_what_it_must_pass(seed: int) -> None:
+    """``maneuver_3d``'s team (a 20 m world box) spans at least a fifth of the picture, not 5 %; on
+    ``obstacle_field`` in 3D the team, its goal and the obstacles on the way between them are all in the picture."""
+    from formation_env.env.engine import Engine
+
+    eng = Engine("maneuver_3d")
+    state = eng.reset(np.random.default_rng(seed), 1)
+    r = Renderer(3, "rgb_array")
+    img = r.draw(eng.frame(state, 0))
+    assert img is not None and _inside(r, state.pos[0]) and _share(r, state.pos[0]) >= 0.2
+    field = Engine("obstacle_field", framework="bipyramid_3d")
+    state = field.reset(np.random.default_rng(seed), 1)
+    frame = field.frame(state, 0)
+    r = Renderer(3, "rgb_array")
+    r.draw(frame)
+    circles = frame["obstacles"]["circles"]
+    lo, hi = (
+        np.minimum(state.pos[0].min(0), state.goal[0].min(0)),
+        np.maximum(state.pos[0].max(0), state.goal[0].max(0)),
+    )
+    between = np.all((circles[:, :3] >= lo) & (circles[:, :3] <= hi), axis=1)  # centres in the team-goal box
+    assert _inside(r, state.pos[0]) and _inside(r, state.goal[0]) and _inside(r, circles[between, :3])
+
+
+def test_3d_view_grows_within_an_episode_and_starts_afresh_at_an_earlier_time() -> None:
+    r = Renderer(3, "rgb_array", width=W, height=H)
+    first = make_frame(d=3, time=0.0)
+    v0 = r.view_box(first)
+    assert np.all(v0[0] >= -5.0) and np.all(v0[1] <= 5.0)  # within the world box
+    assert np.all(v0[0] <= first["positions"].min(0)) and np.all(v0[1] >= first["positions"].max(0))
+    moved = make_frame(d=3, time=1.0, positions=first["positions"] * 0.2)
+    v1 = r.view_box(moved)  # the same episode: the union, no zoom in
+    assert np.all(v1[0] <= v0[0]) and np.all(v1[1] >= v0[1]) and np.all(v1[0] <= moved["positions"].min(0))
+    fresh = r.view_box(make_frame(d=3, time=0.0, positions=first["positions"] * 0.2))
+    assert np.all(fresh[1] - fresh[0] < v0[1] - v0[0])  # an earlier time: a new episode, framed afresh
+    r.reset_view()
+    np.testing.assert_array_equal(r.view_box(moved), fresh)
+
+
 def test_human_mode_under_dummy_driver() -> None:
     r = Renderer(2, "human", width=W, height=H, fps=1000)
     try:

@@ -41,6 +41,21 @@ def test_smoke_train_save_load_evaluate(tmp_path: Path, mode: str) -> None:
 
 
 @pytest.mark.slow
+def test_end_of_training_evaluation_takes_the_env_kwargs_that_change_the_state(tmp_path: Path) -> None:
+    """Trained on another framework (6 agents in 3D instead of the default 5 in 2D), the run's own evaluation and
+    ``load_policy`` without an env act on that framework; a training-only argument (the reward) is not carried."""
+    kw = {"framework": "bipyramid_3d", "reward_weights": {"distance": 0.2}}
+    cfg = train("ppo", "commander", "hold", 256, seed=0, out=tmp_path, smoke=True, n_envs=2, env_kwargs=kw,
+                eval_episodes=1, algo_kwargs={"n_steps": 32}, policy_kwargs={"net_arch": [8, 8]})  # fmt: skip
+    assert cfg["eval"]["episodes"] == 1 and set(cfg["eval"]["metrics"]) == set(METRIC_KEYS)
+    pol = load_policy(tmp_path / "hold_commander.zip")
+    assert pol.scenario == "hold" and pol.env_kwargs == {"framework": "bipyramid_3d"}
+    assert (pol.engine.n, pol.engine.d) == (6, 3)
+    res = evaluate(tmp_path / "hold_commander.zip", None, 1, seed=0)
+    assert res["scenario"] == "hold" and res["episodes"] == 1
+
+
+@pytest.mark.slow
 def test_maneuver_commander_trains_and_evaluates(tmp_path: Path) -> None:
     """A pose-rate commander: trained on the batched env, it acts through its own commanded poses."""
     rates = {"pose_speed": 2.0, "rotation_rate": 1.5}

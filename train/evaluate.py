@@ -133,27 +133,6 @@ def summarise(res: dict[str, Any]) -> tuple[dict[str, float], dict[str, list[flo
     return metrics, cis, worst
 
 
-#: Engine arguments that shape what a policy observes: a learned policy is evaluated with its training values
-#: of these (and the scenario's own success test, whatever its training used).
-SENSING_KWARGS = ("observation", "state_blocks", "k_nearest", "sense_radius", "obs_noise", "n_rays", "n_nearest",
-                  "sensor_range")  # fmt: skip
-
-
-def training_config(path: str | Path) -> dict[str, Any]:
-    """The training config of a saved policy (an SB3 ``.zip`` or an RLlib checkpoint folder; {} without one)."""
-    from agents.policy import LearnedPolicy, RLlibPolicy
-
-    if RLlibPolicy.checkpoint_of(path) is not None:
-        return RLlibPolicy.config_of(path)
-    cp = LearnedPolicy.paths(path)[2]
-    return json.loads(cp.read_text()) if cp.exists() else {}
-
-
-def sensing_kwargs(path: str | Path) -> dict[str, Any]:
-    """The :data:`SENSING_KWARGS` of a saved policy's training config (none when it has no config)."""
-    return {k: v for k, v in training_config(path).get("env_kwargs", {}).items() if k in SENSING_KWARGS}
-
-
 def make_engine(scenario: str, env_kwargs: dict[str, Any] | None = None) -> Engine:
     """The evaluation engine (the env's defaults: double integrators, ``dynamic`` law, dt 0.1 s, 400 samples)."""
     return Engine(scenario, **(env_kwargs or {}))
@@ -183,10 +162,12 @@ def evaluate(
     """Evaluate a policy on the seeded suite ``seed .. seed + episodes - 1`` of ``scenario``.
 
     Args:
-        scenario: a scenario name; None: a saved policy's training scenario, else ``narrow_passage``.
         policy_spec: ``"analytic"``, ``"random"``, a path to a saved SB3 model (.zip), an RLlib checkpoint folder
-            (``python -m train.rllib``'s ``--out`` or its ``checkpoint/``), or a :class:`agents.policy.Policy`.
-        env_kwargs: engine arguments (scenario keyword arguments included).
+            (``python -m train.rllib``'s ``--out`` or its ``checkpoint/``), or a :class:`agents.policy.Policy`
+            (resolved by :func:`agents.policy.load_policy`).
+        scenario: a scenario name; None: the policy's (a saved policy's training scenario, else ``narrow_passage``).
+        env_kwargs: engine arguments (scenario keyword arguments included); None: the policy's (a saved policy's
+            training values of :data:`agents.policy.POLICY_ENV_KWARGS`, else none).
         out: folder for ``episodes.csv``, ``metrics.json``, ``metrics.md``, plots and a GIF (None: nothing written).
         generalisation: for ``narrow_passage``, also evaluate gap widths outside the training range.
         progress: a progress bar of the suite's steps on stderr (None: when stderr is a terminal).
@@ -195,17 +176,16 @@ def evaluate(
         "scenario": ..., "per_episode": {...}, "endings": {ending: episodes} (``agents.rollout.ENDINGS``),
         "generalisation": {suite: metrics}}``.
     """
-    from agents.policy import RLlibPolicy, load_policy
+    from agents.policy import Policy, load_policy
 
-    saved = isinstance(policy_spec, (str, Path)) and (
-        str(policy_spec).endswith(".zip") or RLlibPolicy.checkpoint_of(policy_spec) is not None
-    )
-    if scenario is None:
-        scenario = str(training_config(policy_spec).get("scenario", "narrow_passage")) if saved else "narrow_passage"
-    if env_kwargs is None and saved:
-        env_kwargs = sensing_kwargs(policy_spec)
-    engine = make_engine(scenario, env_kwargs)
-    policy = load_policy(policy_spec, engine) if isinstance(policy_spec, (str, Path)) else policy_spec
+    if isinstance(policy_spec, Policy):  # made by the caller: its scenario and arguments unless given
+        policy = policy_spec
+        scenario = policy.scenario if scenario is None else scenario
+        env_kwargs = policy.env_kwargs if env_kwargs is None else env_kwargs
+        engine = make_engine(scenario, env_kwargs)
+    else:
+        policy = load_policy(policy_spec, scenario=scenario, env_kwargs=env_kwargs)
+        engine, scenario, env_kwargs = policy.engine, policy.scenario, policy.env_kwargs
     seeds = list(range(int(seed), int(seed) + int(episodes)))
     gen_suites = (
         [n for n in GAP_SUITES if n != "train_range"] if generalisation and scenario == "narrow_passage" else []

@@ -14,8 +14,10 @@ bound (over all episodes when none is solved); ``time_vs_analytic`` is the entry
 by episode over the episodes both solved (s; negative: faster than the planner), with each seed's 95 % interval in
 the JSON (``time_vs_analytic_ci95``).
 
-``formation-env leaderboard [--episodes N] [--seed S] [--json]`` writes ``docs/leaderboard.md``; with
-``--json`` it prints ``{"scenarios": {scenario: {entry: {"kind", "metrics", ...}}}}``.
+``formation-env leaderboard [--episodes N] [--seed S] [--json] [--out FOLDER]`` writes ``FOLDER/leaderboard.md``
+(``out/leaderboard.md`` by default, like the other commands' ``--out``); ``--project`` writes the project's own
+instead: ``docs/leaderboard.md`` and the results table of ``README.md`` in the source checkout. With ``--json`` it
+prints ``{"scenarios": {scenario: {entry: {"kind", "metrics", ...}}}}``.
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from formation_env.env.scenarios import REGISTRY
 from .evaluate import _finite, make_engine, paired_difference
 from .evaluate import evaluate as evaluate_suite
 
-__all__ = ["ENTRIES", "LEARNED", "find_policies", "leaderboard", "main", "markdown"]
+__all__ = ["ENTRIES", "LEARNED", "PROJECT_ROOT", "find_policies", "leaderboard", "main", "markdown", "write_project"]
 
 #: Learned entries: name -> (algo, mode).
 LEARNED: dict[str, tuple[str, str]] = {
@@ -54,6 +56,8 @@ ENTRIES: tuple[str, ...] = ("random", "analytic", *LEARNED)
 #: Metrics of every entry's tables (``evaluate``'s, with the time bound and the paired time against the planner).
 SHOWN = ("success_rate", "collision_rate", "time_to_goal", "time_vs_analytic", "time_lower_bound", "mean_formation_err")
 PRETRAINED = POLICY_DIR
+#: The source checkout whose ``docs/leaderboard.md`` and ``README.md`` table ``--project`` rewrites.
+PROJECT_ROOT = Path(__file__).resolve().parents[1]
 
 
 def find_policies(folder: str | Path, scenario: str, entry: str) -> list[Path]:
@@ -198,6 +202,36 @@ def summary_table(board: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+def write_project(board: dict[str, Any], page: str, root: str | Path | None = None) -> list[Path]:
+    """The project's own leaderboard: ``page`` as ``docs/leaderboard.md`` and :func:`summary_table` in place of the
+    results table of ``README.md`` (the lines from its header row to the first line not a table row). Returns the
+    paths written. ``root``: the checkout (default :data:`PROJECT_ROOT`).
+
+    Raises:
+        FileNotFoundError: ``root`` is not a source checkout (no README.md or docs/ in it).
+        ValueError: the README has no results table to replace.
+    """
+    root = Path(PROJECT_ROOT if root is None else root)
+    readme, docs = root / "README.md", root / "docs"
+    if not readme.is_file() or not docs.is_dir():
+        raise FileNotFoundError(
+            f"--project rewrites the source checkout's docs/leaderboard.md and README.md, and {root} is not one "
+            "(no README.md or docs/ in it): run from a clone, or write elsewhere with --out"
+        )
+    table = summary_table(board).splitlines()
+    lines = readme.read_text().splitlines(keepends=True)
+    start = next((i for i, line in enumerate(lines) if line.rstrip("\n") == table[0]), None)
+    if start is None:
+        raise ValueError(f"{readme} has no results table to replace (no line {table[0]!r})")
+    end = start
+    while end < len(lines) and lines[end].startswith("|"):
+        end += 1
+    lines[start:end] = [line + "\n" for line in table]
+    (docs / "leaderboard.md").write_text(page)
+    readme.write_text("".join(lines))
+    return [docs / "leaderboard.md", readme]
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     p = argparse.ArgumentParser(prog="formation-env leaderboard", description=__doc__.splitlines()[0])
     add_arguments(p)
@@ -211,24 +245,42 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true", help='print one JSON object {"scenarios": {...}}')
     p.add_argument("--policies", default=str(PRETRAINED), help="folder of the shipped learned policies")
     p.add_argument("--scenarios", nargs="*", default=None, choices=sorted(REGISTRY), help="default: every one")
-    p.add_argument("--out", default="docs/leaderboard.md", help="the markdown file written")
+    where = p.add_mutually_exclusive_group()
+    where.add_argument("--out", default=None, help="folder of the leaderboard.md written (default: out)")
+    where.add_argument(
+        "--project",
+        action="store_true",
+        help="write the project's own docs/leaderboard.md and README table (every scenario; a source checkout)",
+    )
     add_progress_argument(p)
 
 
 def run_cli(args: argparse.Namespace) -> int:
+    out = Path(args.out if args.out is not None else "out")
+    if out.suffix == ".md":
+        raise ValueError(f"--out is a folder (leaderboard.md is written inside it), got the file name {args.out!r}")
+    if args.project and args.scenarios:
+        raise ValueError("--project writes the whole table: it takes every scenario, drop --scenarios")
     if not Path(args.policies).is_dir():
         raise FileNotFoundError(
             f"--policies must be a folder of learned policies, got {args.policies} (no such folder)"
         )
     board = leaderboard(args.episodes, args.seed, args.policies, args.scenarios, progress=args.progress)
-    cmd = f"formation-env leaderboard --episodes {args.episodes} --seed {args.seed}"
-    Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(args.out).write_text(markdown(board, cmd) + "\n## Summary\n\n" + summary_table(board) + "\n")
+    cmd = f"formation-env leaderboard --episodes {args.episodes} --seed {args.seed}" + (
+        " --project" if args.project else ""
+    )
+    page = markdown(board, cmd) + "\n## Summary\n\n" + summary_table(board) + "\n"
+    if args.project:
+        written = write_project(board, page)
+    else:
+        out.mkdir(parents=True, exist_ok=True)
+        written = [out / "leaderboard.md"]
+        written[0].write_text(page)
     if args.json:
         print(json.dumps(_finite(board)))
     else:
         print(summary_table(board))
-        print(f"written to {args.out}")
+        print("written to " + ", ".join(str(w) for w in written))
     return 0
 
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import os
 import sys
 import time
@@ -123,7 +124,7 @@ def main(argv: list[str] | None = None) -> dict[str, Any]:
 
     import ray
 
-    ray.init(address=args.address, include_dashboard=False, log_to_driver=False, logging_level="ERROR")
+    ray.init(address=args.address, include_dashboard=False, log_to_driver=False, logging_level=logging.ERROR)
     t0 = time.time()
     algo = build_config(scenario, args.seed, runners, env_kwargs, algo_kwargs, hidden, env_version).build_algo()
     history = []

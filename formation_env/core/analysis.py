@@ -247,7 +247,8 @@ def stability_report(
         check: validate omega first (:func:`~formation_env.core.stress.check_partition`:
             symmetric, zero row sums, Omega_ff positive definite, at ``rtol``); ``check=False``
             skips it for speed (an asymmetric omega then gives a meaningless report).
-        rtol: relative tolerance of that check.
+        rtol: relative tolerance of that check (``1e-3`` accepts a rounded matrix such as the paper's printed
+            one, ``paper_omega(exact=False)``).
         dt_search: range (s) of T scanned for every stable window (default :data:`DT_SEARCH`).
         **params: law parameters (gain, eps, K, Q, rounds), see :func:`make_law`.
 

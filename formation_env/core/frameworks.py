@@ -5,7 +5,9 @@ and is listed in :data:`REGISTRY` (:func:`get_framework` builds one by name).
 Each is universally rigid with a designable stress
 (:func:`formation_env.core.design.design_stress`); the paper's printed matrix is
 :func:`paper_omega`. ``trilateration`` and ``helix`` also admit the solver-free
-``design_stress(fw, "constructive")``.
+``design_stress(fw, "constructive")``. :data:`NAMED_FRAMEWORKS` are the frameworks
+that come with their own stress matrix (the env's ``framework="paper"`` and
+``"bipyramid_3d"``): the paper's, and :func:`gram_stress` of the complete graph.
 """
 
 from __future__ import annotations
@@ -24,12 +26,15 @@ from .framework import Framework
 from .validation import as_array, as_index_array, check_int, check_real_scalar, check_seed
 
 __all__ = [
+    "NAMED_FRAMEWORKS",
     "PAPER_OMEGA_PRINTED",
     "REGISTRY",
     "bipyramid",
+    "bipyramid_3d",
     "cube_with_center",
     "farthest_point_leaders",
     "get_framework",
+    "gram_stress",
     "helix",
     "hexagon",
     "octahedron",
@@ -504,6 +509,43 @@ def trilateration(n: int = 100, d: int = 2, seed: int = 0, n_leaders: int | None
     return Framework(r, np.unique(pairs, axis=0), leaders=range(d + 1), name=f"trilateration_{d}d_{n}_s{seed}")
 
 
+def bipyramid_3d() -> Framework:
+    """A 6-agent 3D framework: 4 leaders (triangle plus apex) and 2 followers (lower apex, tail), complete graph
+    (its stress is :func:`gram_stress`)."""
+    r = np.array(
+        [[1.0, 0.0, 0.0], [-0.5, 0.9, 0.0], [-0.5, -0.9, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [-1.5, 0.0, 0.2]]
+    )
+    edges = [(i, j) for i in range(6) for j in range(i + 1, 6)]
+    return Framework(r, edges, leaders=[0, 1, 2, 3], name="bipyramid_3d")
+
+
+def gram_stress(fw: Framework) -> NDArray[np.float64]:
+    """The complete-graph stress N N^T (n, n), N an orthonormal basis (n, n - d - 1) of the affine dependencies
+    of r (the null space of [r, 1]^T).
+
+    PSD with rank n - d - 1, zero row sums and Omega r = 0 by construction; it is
+    supported on every pair of agents, so it is a valid stress only for a
+    complete graph. Scaled so that the largest eigenvalue of Omega_ff is 1.
+    """
+    import scipy.linalg as sla
+
+    h = np.hstack([fw.positions, np.ones((fw.n, 1))])
+    nb = sla.null_space(h.T)
+    om = nb @ nb.T
+    om = (om + om.T) / 2
+    f = list(fw.followers)
+    return om / float(np.linalg.eigvalsh(om[np.ix_(f, f)])[-1])
+
+
+def _paper() -> tuple[Framework, NDArray[np.float64]]:
+    return paper_example(), paper_omega()
+
+
+def _bipyramid() -> tuple[Framework, NDArray[np.float64]]:
+    fw = bipyramid_3d()
+    return fw, gram_stress(fw)
+
+
 # ------------------------------------------------------------------------------------------- registry
 #: Every named framework builder; each takes only keyword arguments with defaults.
 REGISTRY: dict[str, Callable[..., Framework]] = {
@@ -513,10 +555,19 @@ REGISTRY: dict[str, Callable[..., Framework]] = {
     "triangle_formation": triangle_formation,
     "octahedron": octahedron,
     "bipyramid": bipyramid,
+    "bipyramid_3d": bipyramid_3d,
     "cube_with_center": cube_with_center,
     "helix": helix,
     "random_knn": random_knn,
     "trilateration": trilateration,
+}
+
+
+#: Frameworks that come with their own stress matrix, as the env names them: name -> () -> (Framework, omega (n, n)).
+#: The env looks other names up among this module's builders and designs their stress (``design_stress``).
+NAMED_FRAMEWORKS: dict[str, Callable[[], tuple[Framework, NDArray[np.float64]]]] = {
+    "paper": _paper,
+    "bipyramid_3d": _bipyramid,
 }
 
 

@@ -168,7 +168,8 @@ def simulate(
         return_result: return a :class:`SimResult` instead of the positions.
         check: validate omega (:func:`~formation_env.core.stress.check_partition`: symmetric,
             zero row sums, Omega_ff positive definite) at ``rtol``; ``check=False`` skips it.
-        rtol: relative tolerance of that check.
+        rtol: relative tolerance of that check (``1e-3`` accepts a rounded matrix such as the paper's printed
+            one, ``paper_omega(exact=False)``).
         **params: law parameters (gain, eps, K, Q, rounds), see ``make_law``.
 
     Returns:
@@ -234,14 +235,14 @@ def simulate(
     memory = the_law.initial_memory()
     path = _PathStates(dyn, n_l, dt) if leader_path is not None else None
     prev_pos = None
-    if path is not None:
+    if path is not None and leader_path is not None:
         xl0, _ = path(leader_path(0), 0, None)
         states[0, part.leaders] = xl0
         prev_pos = dyn.position(xl0)
     worst_res, worst_k, scale, u_max = 0.0, -1, 1.0, 0.0
     for k in range(steps):
         xk = states[k]
-        if path is None:
+        if path is None or leader_path is None:
             u_l = np.zeros((n_l, dyn.p))
             xl_next = None
         else:

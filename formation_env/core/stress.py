@@ -56,6 +56,13 @@ StressLike: TypeAlias = Any
 #: Default relative tolerance of every check (relative to the largest |eigenvalue| or entry).
 DEFAULT_RTOL = 1e-8
 
+#: The remedies named when a tolerance check fails: a rounded matrix (the paper prints its omega to 3 decimals) fails
+#: the default tolerance by far, and passes with a looser ``rtol`` or after projection onto the exact stresses.
+ROUNDED_REMEDY = (
+    "if omega is rounded (as the paper's printed matrix is), pass rtol=1e-3 to accept it as it is, or use "
+    "project_stress(omega, fw) (the paper's: paper_omega()) for the nearest exact stress"
+)
+
 #: Above this many agents the dense checks are refused for sparse input.
 is_sparse_dense_threshold = 3000
 
@@ -182,7 +189,8 @@ def check_stress(
     worst = int(np.argmax(np.abs(rowsum)))
     if abs(rowsum[worst]) > tol * np.sqrt(n):
         raise StressMatrixError(
-            f"omega rows must sum to zero: row {worst} sums to {rowsum[worst]:.3g} (tolerance {tol * np.sqrt(n):.3g})"
+            f"omega rows must sum to zero: row {worst} sums to {rowsum[worst]:.3g} (tolerance {tol * np.sqrt(n):.3g} "
+            f"at rtol={rtol:g}); {ROUNDED_REMEDY}"
         )
     resid = np.asarray(omega @ r)
     worst = int(np.argmax(np.max(np.abs(resid), axis=1)))
@@ -190,7 +198,7 @@ def check_stress(
         raise StressMatrixError(
             f"omega is not an equilibrium stress of the nominal positions: Omega r = 0 fails at "
             f"agent {worst} with residual {np.max(np.abs(resid[worst])):.3g} "
-            f"(tolerance {tol * rscale * np.sqrt(n):.3g})"
+            f"(tolerance {tol * rscale * np.sqrt(n):.3g} at rtol={rtol:g}); {ROUNDED_REMEDY}"
         )
     if check_graph:
         allowed = {(i, j) for i, j in fw.edges}
@@ -215,7 +223,8 @@ def _check_spectrum_dense(omega: NDArray[np.float64], fw: Framework, rtol: float
     etol = rtol * max(abs(eig[0]), abs(eig[-1]))
     if eig[0] < -etol:
         raise StressMatrixError(
-            f"omega is not positive semi-definite: smallest eigenvalue {eig[0]:.3g} < -tolerance {etol:.3g}"
+            f"omega is not positive semi-definite: smallest eigenvalue {eig[0]:.3g} < -tolerance {etol:.3g} "
+            f"(rtol={rtol:g}); {ROUNDED_REMEDY}"
         )
     rank = int(np.sum(eig > etol))
     if rank != n - d - 1:
@@ -277,7 +286,7 @@ def _ldl_inertia(a: sp.spmatrix, rtol: float) -> tuple[int, int, NDArray[np.floa
     return int(np.sum(diag < -tol)), int(np.sum(np.abs(diag) <= tol)), diag
 
 
-def project_stress(omega: ArrayLike, fw: Framework, rtol: float = DEFAULT_RTOL) -> NDArray[np.float64]:
+def project_stress(omega: StressLike, fw: Framework, rtol: float = DEFAULT_RTOL) -> NDArray[np.float64]:
     """Nearest exact equilibrium stress of ``fw`` to ``omega`` in the Frobenius norm.
 
     Projects the edge weights -Omega_ij onto the equilibrium-stress space of the
@@ -440,7 +449,7 @@ def check_partition(part: Partition, rtol: float = DEFAULT_RTOL, name: str = "om
     if abs(rowsum[worst]) > tol:
         raise StressMatrixError(
             f"{name} rows must sum to zero (a stress matrix): row {worst} sums to {rowsum[worst]:.3g} "
-            f"(tolerance {tol:.3g})"
+            f"(tolerance {tol:.3g} at rtol={rtol:g}); {ROUNDED_REMEDY}"
         )
     if part.sparse and part.n_f > 2000:
         try:

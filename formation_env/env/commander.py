@@ -27,7 +27,9 @@ __all__ = ["ACTION_MODES", "FormationCommanderEnv", "versioned"]
 ACTION_MODES = ("leaders", "maneuver")
 
 
-class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.float32]]):
+# gymnasium types Env.render() with an unbound TypeVar (RenderFrame): SingleEnv.render's (H, W, 3) uint8 array
+# is such a frame, which mypy cannot tell
+class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.float32]]):  # type: ignore[misc]
     """A single-agent view of the formation env: one action commands all leaders.
 
     ## Description

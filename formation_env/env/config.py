@@ -23,6 +23,7 @@ from formation_env.core.design import design_stress, trilateration_cliques
 from formation_env.core.dynamics import LinearDynamics, riccati_gain
 from formation_env.core.errors import ControlDimension, FormationError
 from formation_env.core.framework import Framework
+from formation_env.core.frameworks import NAMED_FRAMEWORKS
 from formation_env.core.laws import (
     DynamicLeaderLaw,
     FollowerLaw,
@@ -35,7 +36,7 @@ from formation_env.core.laws import (
 from formation_env.core.stress import Partition, check_stress
 from formation_env.core.validation import check_square_matrix
 
-from .scenarios import NAMED_FRAMEWORKS, REGISTRY
+from .scenarios import REGISTRY
 
 __all__ = [
     "DYNAMICS",

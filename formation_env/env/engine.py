@@ -442,7 +442,7 @@ class Engine:
         state: EngineState,
         actions: ArrayLike,
         rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
-    ) -> tuple[EngineState, NDArray[np.float32], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
+    ) -> tuple[EngineState, NDArray[np.float32], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, NDArray[Any]]]:
         """One sample of every environment: :meth:`advance`, and every leader's observation of the new state."""
         new, ctx, rew, terminated, truncated, info = self.advance(state, actions, rng)
         return new, ctx.obs, rew, terminated, truncated, info
@@ -452,7 +452,7 @@ class Engine:
         state: EngineState,
         actions: ArrayLike,
         rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
-    ) -> tuple[EngineState, StepContext, Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, Array]]:
+    ) -> tuple[EngineState, StepContext, Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, NDArray[Any]]]:
         """One sample of every environment (the compiled step of :mod:`~formation_env.env.kernel`).
 
         Args:

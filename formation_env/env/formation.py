@@ -15,13 +15,13 @@ from pettingzoo.utils.conversions import parallel_to_aec_wrapper
 from pettingzoo.utils.wrappers import OrderEnforcingWrapper
 
 from formation_env.core.errors import ControlDimension, FormationError
-from formation_env.core.validation import as_array, check_mapping, check_seed
+from formation_env.core.validation import as_array, check_int, check_mapping, check_seed
 
 from .engine import INFO_KEYS, Engine, EngineState, StepInfo
 from .observations import observation_table
 from .rewards import reward_table
 
-__all__ = ["CheckedAEC", "FormationEnv", "aec_env", "neutral_info"]
+__all__ = ["CheckedAEC", "FormationAEC", "FormationEnv", "aec_env", "neutral_info"]
 
 
 def neutral_info(goal_distance: float, formation_error: float) -> StepInfo:
@@ -156,7 +156,8 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
 
         Terminated (all agents) on a collision or on success (all agents within ``goal_tol`` of their
         goal positions and formation error below ``formation_tol`` for ``hold_steps`` samples;
-        ``maneuver`` does not end on success). Truncated after ``max_cycles`` steps.
+        ``maneuver`` does not end on success). Truncated after ``max_cycles`` steps (a positive integer, also when set
+        on the env).
 
         ## Arguments
 
@@ -253,12 +254,13 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
 
     @property
     def max_cycles(self) -> int:
-        """Steps per episode before truncation."""
+        """Steps per episode before truncation: a positive integer (PettingZoo's ``parallel_api_test`` sets it).
+        A scenario's time windows (``maneuver``'s) keep the length the env was made with."""
         return self.engine.max_cycles
 
     @max_cycles.setter
-    def max_cycles(self, value: int) -> None:
-        self.engine.max_cycles = value
+    def max_cycles(self, value: Any) -> None:
+        self.engine.max_cycles = check_int(value, "max_cycles", low=1, what="a positive integer number of steps")
 
     @property
     def engine_state(self) -> EngineState | None:
@@ -351,6 +353,20 @@ class CheckedAEC(parallel_to_aec_wrapper):
         super().step(action)
 
 
+class FormationAEC(OrderEnforcingWrapper):
+    """PettingZoo's order-enforcing wrapper of the AEC view, with ``max_cycles`` passed to the parallel env
+    (checked there) instead of kept by the wrapper, unseen by the env."""
+
+    @property
+    def max_cycles(self) -> int:
+        """Steps per episode before truncation (the env's)."""
+        return int(self.env.unwrapped.max_cycles)
+
+    @max_cycles.setter
+    def max_cycles(self, value: Any) -> None:
+        self.env.unwrapped.max_cycles = value
+
+
 def aec_env(parallel: FormationEnv) -> AECEnv:
     """The AEC view of ``parallel`` (PettingZoo's ``parallel_to_aec`` with :class:`CheckedAEC`, order enforced)."""
-    return OrderEnforcingWrapper(CheckedAEC(parallel))
+    return FormationAEC(CheckedAEC(parallel))

@@ -403,7 +403,7 @@ class Outputs(NamedTuple):
 
 
 @jit
-def outputs(s: StepArrays) -> tuple[Array, ...]:  # pragma: no cover
+def outputs(s: StepArrays) -> tuple[NDArray[Any], ...]:  # pragma: no cover
     """The returned part of a step's arrays, in :class:`Outputs` order."""
     return (s.x, s.mem, s.pos, s.vel, s.goal, s.gvel, s.k, s.gdist, s.streak, s.err, s.clear, s.gmax, s.flags,
             s.effort, s.theta)  # fmt: skip

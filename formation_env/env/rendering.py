@@ -28,8 +28,13 @@ display, so it runs headless (``SDL_VIDEODRIVER=dummy`` or no display at all).
 3D frames use a fixed orthographic camera: the world is rotated about z by
 ``yaw`` (30 degrees) and viewed from ``elevation`` (25 degrees) above the
 horizontal; agents are sorted by depth, shaded as spheres and scaled by +-15 %
-with depth. Large swarms (n > ``large_n``) are painted as small squares straight
-into the pixel array, so a 10,000-agent frame stays well under 0.5 s.
+with depth. The camera frames the team and what it must pass, not the whole world
+box (:meth:`Renderer.view_box`): the agents, their goal, targets and trail and the
+obstacles reaching into that region, padded and kept within the world box; the floor
+grid and the wireframe drawn are that box. Within an episode (frame times not
+decreasing) the view only grows, so an animation does not zoom back and forth.
+Large swarms (n > ``large_n``) are painted as small squares straight into the
+pixel array, so a 10,000-agent frame stays well under 0.5 s.
 """
 
 from __future__ import annotations
@@ -127,6 +132,8 @@ class Renderer:
         max_trail_segments: above n * T trail segments, trails are painted as pixels.
         max_shadows: 3D floor shadows and drop lines are drawn for n <= max_shadows.
         yaw, elevation: 3D camera angles in degrees.
+        view_pad: 3D view margin around the team's region, a fraction of its largest side.
+        min_view: 3D view's smallest side (m), so a small or resting team is not blown up to the frame.
     """
 
     max_edges: int = 20_000
@@ -135,6 +142,8 @@ class Renderer:
     max_shadows: int = 200
     yaw: float = 30.0
     elevation: float = 25.0
+    view_pad: float = 0.25
+    min_view: float = 2.0
 
     def __init__(self, d: int, render_mode: str, width: int = 640, height: int = 640, fps: int = 20) -> None:
         if render_mode not in RENDER_MODES:
@@ -180,21 +189,86 @@ class Renderer:
         self._centre_plane = np.zeros(2)
         self._centre_px = np.array([self.width / 2.0, self.height / 2.0])
         self._depth_range = (0.0, 1.0)
+        # 3D view of the current episode: its box (2, 3), the world box and the time of the frame it was grown by.
+        self._view: NDArray[np.float64] | None = None
+        self._view_world: NDArray[np.float64] | None = None
+        self._view_time = -math.inf
 
     # ------------------------------------------------------------------ transform
 
-    def set_bounds(self, bounds: Any) -> None:
-        """Fit the world box ``bounds`` ((2, d), metres: min row, max row) into the image.
+    def view_box(self, frame: Mapping[str, Any]) -> NDArray[np.float64]:
+        """The 3D view of ``frame``: min and max corners (2, 3), metres.
 
-        Keeps the aspect ratio and leaves a margin plus bands for the status text (top)
-        and legend (bottom). ``draw`` calls this with each frame's ``bounds``.
+        The box of the agents, goal, affine targets and trail, grown by every obstacle (circle, wall segment) that
+        reaches into it padded by ``view_pad`` of its largest side, then padded by that margin plus the agent radius,
+        widened to at least ``min_view`` per side and cut to the world box (``frame["bounds"]``) where it holds the
+        team. Within an episode (a frame time not below the last one, the same world box) it is the union with the
+        previous view; an earlier time starts afresh (:meth:`reset_view` does too). 2D frames: the world box.
         """
+        return self._view_box(self._check_frame(frame))
+
+    def _view_box(self, f: dict[str, Any]) -> NDArray[np.float64]:
+        """:meth:`view_box` of a checked frame (``_check_frame``)."""
+        world = self._checked_bounds(f["bounds"])
+        if self.d == 2:
+            return world
+        parts = [f["positions"], f["trail"].reshape(-1, 3)]
+        parts += [p for p in (f["goal"], f["targets"]) if p is not None]
+        pts = np.concatenate(parts)
+        pts = pts[np.all(np.isfinite(pts), axis=1)]
+        if pts.shape[0] == 0:
+            return world
+        lo, hi = pts.min(axis=0), pts.max(axis=0)
+        margin = self.view_pad * max(float(np.max(hi - lo)), self.min_view)
+        reach_lo, reach_hi = lo - margin, hi + margin
+        circles, segments = f["circles"], f["segments"]
+        if circles.shape[0]:
+            c, rad = circles[:, :3], circles[:, 3]
+            ok = np.all(np.isfinite(circles), axis=1)
+            ok &= np.linalg.norm(np.clip(c, reach_lo, reach_hi) - c, axis=1) <= rad
+            if ok.any():
+                lo = np.minimum(lo, (c[ok] - rad[ok, None]).min(axis=0))
+                hi = np.maximum(hi, (c[ok] + rad[ok, None]).max(axis=0))
+        if segments.shape[0]:
+            ok = np.all(np.isfinite(segments), axis=(1, 2))
+            ok &= np.all(segments.min(axis=1) <= reach_hi, axis=1) & np.all(segments.max(axis=1) >= reach_lo, axis=1)
+            if ok.any():
+                lo = np.minimum(lo, segments[ok].min(axis=(0, 1)))
+                hi = np.maximum(hi, segments[ok].max(axis=(0, 1)))
+        pad = self.view_pad * max(float(np.max(hi - lo)), self.min_view) + f["agent_radius"]
+        lo, hi = lo - pad, hi + pad
+        short = hi - lo < self.min_view
+        mid = (lo + hi) / 2.0
+        lo, hi = np.where(short, mid - self.min_view / 2, lo), np.where(short, mid + self.min_view / 2, hi)
+        inside = (lo < world[1]) & (hi > world[0])  # cut to the world box on the axes where the region meets it
+        lo, hi = np.where(inside, np.maximum(lo, world[0]), lo), np.where(inside, np.minimum(hi, world[1]), hi)
+        same = self._view is not None and self._view_world is not None and np.array_equal(self._view_world, world)
+        if same and f["time"] >= self._view_time and self._view is not None:
+            lo, hi = np.minimum(lo, self._view[0]), np.maximum(hi, self._view[1])
+        self._view, self._view_world, self._view_time = np.stack([lo, hi]), world, f["time"]
+        return self._view.copy()
+
+    def reset_view(self) -> None:
+        """Forget the 3D view of the episode drawn so far: the next frame is framed afresh."""
+        self._view, self._view_world, self._view_time = None, None, -math.inf
+
+    def _checked_bounds(self, bounds: Any) -> NDArray[np.float64]:
+        """``bounds`` as a (2, d) float array: finite, max >= min per axis (FormationError otherwise)."""
         b = np.asarray(bounds, dtype=np.float64)
         check_shape(b, (2, self.d), "frame['bounds']")
         if not np.all(np.isfinite(b)):
             raise FormationError("frame['bounds'] holds non-finite values")
         if np.any(b[1] < b[0]):
             raise FormationError(f"frame['bounds'] max must be >= min per axis, got min {b[0]} and max {b[1]}")
+        return b
+
+    def set_bounds(self, bounds: Any) -> None:
+        """Fit the box ``bounds`` ((2, d), metres: min row, max row) into the image.
+
+        Keeps the aspect ratio and leaves a margin plus bands for the status text (top)
+        and legend (bottom). ``draw`` calls this with each frame's ``bounds`` (2D) or :meth:`view_box` (3D).
+        """
+        b = self._checked_bounds(bounds)
         self._bounds = b
         if self.d == 2:
             corners = b
@@ -348,7 +422,7 @@ class Renderer:
             wrong shapes, out-of-range indices, bad bounds or radius.
         """
         f = self._check_frame(frame)
-        self.set_bounds(f["bounds"])
+        self.set_bounds(self._view_box(f) if self.d == 3 else f["bounds"])
         surf = self._get_surface()
         surf.fill(PALETTE["background"])
         n = f["positions"].shape[0]

@@ -50,8 +50,8 @@ class FormationMultiAgentEnv(MultiAgentEnv):
         version = int(kw.pop("env_version", 1))
         self.par_env = FormationEnv(**with_version(version, kw))
         self.agents = self.possible_agents = list(self.par_env.possible_agents)
-        self.observation_spaces = dict(self.par_env.observation_spaces)
-        self.action_spaces = dict(self.par_env.action_spaces)
+        self.observation_spaces = dict[Any, Any](self.par_env.observation_spaces)  # agent -> Box, RLlib's key type
+        self.action_spaces = dict[Any, Any](self.par_env.action_spaces)
 
     @property
     def engine(self) -> Any:
@@ -63,7 +63,8 @@ class FormationMultiAgentEnv(MultiAgentEnv):
         self.agents = list(self.possible_agents)
         return obs, infos
 
-    def step(self, action_dict: dict[str, Any]) -> tuple[dict, dict, dict, dict, dict]:
+    # RLlib's multi-agent step returns a dict per agent (and "__all__") where gymnasium.Env declares one agent's values
+    def step(self, action_dict: dict[Any, Any]) -> tuple[dict, dict, dict, dict, dict]:  # type: ignore[override]
         obs, rew, term, trunc, infos = self.par_env.step(action_dict)
         term = {**term, "__all__": all(term.values())}
         trunc = {**trunc, "__all__": all(trunc.values())}

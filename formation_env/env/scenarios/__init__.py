@@ -18,7 +18,9 @@ A new scenario is a file with a :class:`Scenario` subclass and a line here; test
 
 from __future__ import annotations
 
-from ._base import NAMED_FRAMEWORKS, Scenario
+from formation_env.core.frameworks import NAMED_FRAMEWORKS  # re-exported: the env's names of frameworks
+
+from ._base import Scenario
 from .hold import Hold
 from .maneuver import Maneuver
 from .maneuver_3d import Maneuver3D

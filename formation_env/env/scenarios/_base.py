@@ -1,4 +1,4 @@
-"""The scenario interface, shared batched pose helpers, and the env's named frameworks.
+"""The scenario interface and shared batched pose helpers.
 
 A scenario is a small class in its own file (MPE2 ``scenarios/``, VMAS ``BaseScenario``) that supplies the task;
 the engine owns the dynamics, the follower law, contacts, observations and rewards, and knows no scenario. The
@@ -34,13 +34,10 @@ from ..kernel import straight_route
 from ..obstacles import Obstacle
 
 __all__ = [
-    "NAMED_FRAMEWORKS",
     "Draw",
     "DrawPlan",
     "Scenario",
     "affine_batch",
-    "bipyramid_3d",
-    "gram_stress",
     "rotation_2d",
     "rotation_3d",
     "uniform",
@@ -89,52 +86,6 @@ def affine_batch(r: Array, theta: Array, b: Array) -> Array:
     x = np.einsum("bij,jn->bin", theta, np.ascontiguousarray(np.transpose(r)))
     x += b[:, :, None]
     return np.ascontiguousarray(x.transpose(0, 2, 1))
-
-
-def gram_stress(fw: Framework) -> Array:
-    """The complete-graph stress N N^T, N an orthonormal basis of the affine dependencies of r.
-
-    PSD with rank n - d - 1, zero row sums and Omega r = 0 by construction; it is
-    supported on every pair of agents, so it is a valid stress only for a
-    complete graph. Scaled so that the largest eigenvalue of Omega_ff is 1.
-    """
-    import scipy.linalg as sla
-
-    h = np.hstack([fw.positions, np.ones((fw.n, 1))])
-    nb = sla.null_space(h.T)
-    om = nb @ nb.T
-    om = (om + om.T) / 2
-    f = list(fw.followers)
-    return om / float(np.linalg.eigvalsh(om[np.ix_(f, f)])[-1])
-
-
-def bipyramid_3d() -> Framework:
-    """A 6-agent 3D framework: 4 leaders (triangle plus apex) and 2 followers (lower apex, tail), complete graph
-    (its stress is :func:`gram_stress`)."""
-    r = np.array(
-        [[1.0, 0.0, 0.0], [-0.5, 0.9, 0.0], [-0.5, -0.9, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [-1.5, 0.0, 0.2]]
-    )
-    edges = [(i, j) for i in range(6) for j in range(i + 1, 6)]
-    return Framework(r, edges, leaders=[0, 1, 2, 3], name="bipyramid_3d")
-
-
-def _paper() -> tuple[Framework, Array]:
-    from formation_env.core.frameworks import paper_example, paper_omega
-
-    return paper_example(), paper_omega()
-
-
-def _bipyramid() -> tuple[Framework, Array]:
-    fw = bipyramid_3d()
-    return fw, gram_stress(fw)
-
-
-#: Frameworks the env knows by name, with their stress matrices: name -> () -> (Framework, omega).
-#: Other names are looked up in ``formation_env.core.frameworks`` (stress from ``design_stress``).
-NAMED_FRAMEWORKS: dict[str, Callable[[], tuple[Framework, Array]]] = {
-    "paper": _paper,
-    "bipyramid_3d": _bipyramid,
-}
 
 
 class Scenario:

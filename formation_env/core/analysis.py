@@ -20,7 +20,15 @@ from .network import Network, check_network, check_network_law
 from .stress import DEFAULT_RTOL, Partition, check_partition
 from .validation import check_bool, check_dt, check_rtol
 
-__all__ = ["DT_SEARCH", "StabilityReport", "dt_interval", "extreme_eigenvalues", "stability_report", "stable_windows"]
+__all__ = [
+    "DT_SEARCH",
+    "StabilityReport",
+    "dt_interval",
+    "extreme_eigenvalues",
+    "network_dt_max",
+    "stability_report",
+    "stable_windows",
+]
 
 #: Default range of sampling periods T (s) scanned for stable windows by :func:`stability_report`.
 DT_SEARCH: tuple[float, float] = (1e-3, 100.0)
@@ -719,3 +727,54 @@ def _largest_loss(ok: Any) -> float:
         else:
             bad = mid
     return good
+
+
+def network_dt_max(
+    omega: Any,
+    leaders: Sequence[int],
+    network: Network | dict[str, Any],
+    law: str = "stationary",
+    dynamics: LinearDynamics | None = None,
+    *,
+    t_lo: float = 1e-3,
+    t_hi: float = 10.0,
+    points: int = 60,
+    **params: Any,
+) -> float:
+    """The largest sampling period (s) of the first stable window of T over ``network`` (no jitter).
+
+    Scans ``points`` log-spaced periods in [t_lo, t_hi] from below and bisects the first loss of stability
+    (60 halvings); ``t_hi`` if none is lost, 0 if already ``t_lo`` is unstable. Stability is
+    :func:`stability_report`'s: rho of the augmented matrix (delays), mean square (loss).
+    """
+    from .network import loop_model, network_radius
+
+    part = Partition(omega, leaders)
+    check_partition(part)
+    net = check_network(network)
+    if net is None:
+        raise TypeError("network must be a Network or a dict of its fields, got None")
+    if net.jitter is not None:
+        raise FormationError("network_dt_max needs a network without jitter (under jitter the periods are given)")
+    check_network_law(law)
+    dyn = check_dynamics(dynamics) if dynamics is not None else LinearDynamics.single_integrator(2)
+    t_lo, t_hi = check_dt(t_lo, "t_lo"), check_dt(t_hi, "t_hi")
+
+    def stable(t: float) -> bool:
+        try:
+            the_law = make_law(law, part, dyn, t, **params)
+        except UnstableParameterError:
+            return False
+        return network_radius(loop_model(part, dyn, the_law.eps * the_law.K, net), t) < 1.0  # type: ignore[attr-defined]
+
+    grid = np.geomspace(t_lo, t_hi, points)
+    if not stable(float(grid[0])):
+        return 0.0
+    for a, b in itertools.pairwise(grid):
+        if not stable(float(b)):
+            good, bad = float(a), float(b)
+            for _ in range(60):
+                mid = 0.5 * (good + bad)
+                good, bad = (mid, bad) if stable(mid) else (good, mid)
+            return good
+    return float(t_hi)

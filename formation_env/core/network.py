@@ -102,7 +102,7 @@ def check_network_law(law: str) -> None:
 
 
 def levin_may_bound(delay: int) -> float:
-    """Levin and May (1960): x(k+1) = x(k) - a x(k - d) is stable iff 0 < a < 2 sin(pi / (2 (2d + 1)))."""
+    """Levin and May (1976): x(k+1) = x(k) - a x(k - d) is stable iff 0 < a < 2 sin(pi / (2 (2d + 1)))."""
     d = check_int(delay, "delay", low=0)
     return 2.0 * math.sin(math.pi / (2.0 * (2 * d + 1)))
 

@@ -179,12 +179,12 @@ class Network:
             if not isinstance(kind, str) or kind not in QUANTISERS:
                 raise FormationError(f"quantise[0] must be 'uniform' or 'log', got {_describe(kind)}")
             if kind == "uniform":
-                val = check_real_scalar(qz[1], "quantise[1]", low=0.0, what="a positive quantisation step delta")
+                qval = check_real_scalar(qz[1], "quantise[1]", low=0.0, what="a positive quantisation step delta")
             else:
-                val = check_real_scalar(
+                qval = check_real_scalar(
                     qz[1], "quantise[1]", low=0.0, high=1.0, what="a logarithmic density rho in (0, 1)"
                 )
-            set_(self, "quantise", (kind, val))
+            set_(self, "quantise", (kind, qval))
 
     # ------------------------------------------------------------------ forms
     def as_dict(self) -> dict[str, Any]:

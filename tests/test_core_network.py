@@ -468,3 +468,23 @@ def test_large_frameworks_are_refused_for_mean_square_with_the_size():
     # the delay analysis goes further
     rep = stability_report(rf.omega, rf.fw.leaders, dt=0.05, network=Network(delay=1), dt_search=(0.01, 10.0))
     assert rep.exact
+
+
+# ---------------------------------------------------------------------- the linear law (double integrators)
+
+
+def test_linear_law_loss_monte_carlo_matches_mean_square_rate():
+    net = Network(loss=0.3)
+    rep = stability_report(OM, LEADERS, dt=0.5, law="linear", dynamics=DI, network=net)
+    assert rep.exact and rep.stable
+    rms = _mc_rms(net, dt=0.5, steps=150, seeds=100, law="linear", dynamics=DI)
+    assert _rate(rms, 50, 150) == pytest.approx(rep.spectral_radius, abs=MC_RATE_TOL)
+
+
+def test_linear_law_uniform_quantiser_bound():
+    net = Network(quantise=("uniform", 0.05))
+    rep = stability_report(OM, LEADERS, dt=0.5, law="linear", dynamics=DI, network=net)
+    res = _sim(net, dt=0.5, steps=600, law="linear", dynamics=DI)
+    tgt = np.concatenate([res.targets, np.zeros_like(res.targets)], axis=-1)  # targets at rest: zero velocity
+    tail = np.abs(res.states[300:, FW.followers] - tgt[300:])
+    assert 0 < tail.max() <= rep.ultimate_bound

@@ -488,3 +488,18 @@ def test_linear_law_uniform_quantiser_bound():
     tgt = np.concatenate([res.targets, np.zeros_like(res.targets)], axis=-1)  # targets at rest: zero velocity
     tail = np.abs(res.states[300:, FW.followers] - tgt[300:])
     assert 0 < tail.max() <= rep.ultimate_bound
+
+
+def test_report_network_regions_and_figures(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")
+    from formation_env import report
+
+    monkeypatch.setattr(report, "NETWORK_DELAYS", (0, 2))
+    monkeypatch.setattr(report, "NETWORK_LOSSES", (0.0, 0.8))
+    reg = report.network_regions()
+    np.testing.assert_allclose(reg["delay_input"], reg["levin_may"], rtol=1e-6)
+    np.testing.assert_allclose(reg["delay_neighbours"], 2 / LAM_MAX, rtol=1e-6)
+    assert reg["loss_hold"][0] == pytest.approx(2 / LAM_MAX, rel=1e-6) == reg["loss_drop"][0]
+    assert reg["loss_drop"][1] < 1.0 < reg["loss_hold"][1]  # drop at p = 0.8 is past its T = 1 edge (0.685)
+    for path in report.plot_network_regions(reg, tmp_path):
+        assert path.stat().st_size > 10_000

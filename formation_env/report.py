@@ -268,6 +268,11 @@ def _network_section(out: Path) -> list[str]:
         "| Levin-May | " + " | ".join(f"{t:.4g}" for t in regions["levin_may"]) + " |",
         '| delayed="neighbours" | ' + " | ".join(f"{t:.4g}" for t in regions["delay_neighbours"]) + " |",
         "",
+        "| p | " + " | ".join(f"{p:g}" for p in regions["losses"]) + " |",
+        "|---|" + "---|" * len(regions["losses"]),
+        "| hold | " + " | ".join(f"{t:.4g}" for t in regions["loss_hold"]) + " |",
+        "| drop | " + " | ".join(f"{t:.4g}" for t in regions["loss_drop"]) + " |",
+        "",
         f"![stable T against delay]({fig_d.name}) ![stable T against loss]({fig_l.name})",
         "",
     ]

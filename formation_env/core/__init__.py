@@ -35,6 +35,7 @@ from .errors import (
 from .framework import Framework
 from .frameworks import paper_example, paper_omega
 from .laws import LAWS, DynamicLeaderLaw, FollowerLaw, PaperLinearLaw, StressFeedbackLaw, make_law
+from .network import Network
 from .simulate import SimResult, simulate
 from .stress import (
     Partition,
@@ -57,6 +58,7 @@ __all__ = [
     "LawAssumptionWarning",
     "LinearDynamics",
     "Maneuver",
+    "Network",
     "PaperLinearLaw",
     "Partition",
     "ReachabilityWarning",

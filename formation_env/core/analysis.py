@@ -16,10 +16,19 @@ from numpy.typing import NDArray
 from .dynamics import LinearDynamics, check_dynamics
 from .errors import FormationError, UnstableParameterError
 from .laws import DynamicLeaderLaw, FollowerLaw, StressFeedbackLaw, make_law
+from .network import Network, check_network, check_network_law
 from .stress import DEFAULT_RTOL, Partition, check_partition
 from .validation import check_bool, check_dt, check_rtol
 
-__all__ = ["DT_SEARCH", "StabilityReport", "dt_interval", "extreme_eigenvalues", "stability_report", "stable_windows"]
+__all__ = [
+    "DT_SEARCH",
+    "StabilityReport",
+    "dt_interval",
+    "extreme_eigenvalues",
+    "network_dt_max",
+    "stability_report",
+    "stable_windows",
+]
 
 #: Default range of sampling periods T (s) scanned for stable windows by :func:`stability_report`.
 DT_SEARCH: tuple[float, float] = (1e-3, 100.0)
@@ -51,6 +60,20 @@ class StabilityReport:
         rho_opt: the spectral radius at ``dt_opt``.
         dt_search: the range (s) scanned for ``windows``.
         jacobi_radius: ``dynamic_distributed`` only: spectral radius of J = -D^-1 N_ff.
+        network: with ``network=``, the network's dict form (:meth:`Network.as_dict`); then
+            ``spectral_radius`` is the per-sample decay factor of the loop over the network: rho of the
+            augmented one-step matrix (delays), or sqrt(rho(E[A kron A])), the decay of the RMS error
+            over the random losses and periods; ``dt_range``/``windows`` are the stable periods at
+            that network.
+        exact: whether ``stable`` comes from a necessary and sufficient test (None: perfect network,
+            where every test above is exact).
+        criterion: the test behind ``stable`` (network only).
+        delay_max: the largest stable delay (samples) at ``dt``, the other settings kept (networks with a delay).
+        loss_max: the largest loss probability that is mean-square stable at ``dt`` (networks with loss).
+        steady_error: ``drop`` loss: the stationary RMS formation error sqrt(E ||x_f - x_f*||^2) the dropped
+            terms leave (its mean is 0); needs ``x_leaders``.
+        ultimate_bound: quantisation: a bound on limsup max_i |x_i - x_i*| (every component of every
+            follower) (uniform: always; log: when the sector condition holds and ``x_leaders`` is given).
     """
 
     law: str
@@ -73,6 +96,13 @@ class StabilityReport:
     rho_opt: float | None = None
     dt_search: tuple[float, float] | None = None
     jacobi_radius: float | None = None
+    network: dict[str, Any] | None = None
+    exact: bool | None = None
+    criterion: str | None = None
+    delay_max: int | None = None
+    loss_max: float | None = None
+    steady_error: float | None = None
+    ultimate_bound: float | None = None
 
     @property
     def dt_max(self) -> float | None:
@@ -89,6 +119,8 @@ class StabilityReport:
                 v = list(v)
             elif isinstance(v, list):
                 v = [list(w) for w in v]
+            elif isinstance(v, dict):
+                v = dict(v)
             elif isinstance(v, float) and not math.isfinite(v):
                 v = str(v)
             out[k] = v
@@ -114,6 +146,13 @@ class StabilityReport:
             )
         if self.stable:
             lines.append(f"  decay rate {self.decay_rate:.4g} 1/s, error / 1e6 in {self.steps_to_1e6:.1f} steps")
+        if self.network is not None:
+            lines.insert(1, f"  network {self.network}")
+            lines.append(f"  test: {self.criterion} ({'exact' if self.exact else 'sufficient'})")
+            for key in ("delay_max", "loss_max", "steady_error", "ultimate_bound"):
+                val = getattr(self, key)
+                if val is not None:
+                    lines.append(f"  {key} = {val:.6g}" if isinstance(val, float) else f"  {key} = {val}")
         lines.extend(f"  note: {n}" for n in self.notes)
         return "\n".join(lines)
 
@@ -234,6 +273,8 @@ def stability_report(
     check: bool = True,
     rtol: float = DEFAULT_RTOL,
     dt_search: tuple[float, float] | None = None,
+    network: Network | dict[str, Any] | None = None,
+    x_leaders: Any = None,
     **params: Any,
 ) -> StabilityReport:
     """Closed-loop stability of ``law`` on stress ``omega`` at sampling period ``dt`` (s).
@@ -250,6 +291,10 @@ def stability_report(
         rtol: relative tolerance of that check (``1e-3`` accepts a rounded matrix such as the paper's printed
             one, ``paper_omega(exact=False)``).
         dt_search: range (s) of T scanned for every stable window (default :data:`DT_SEARCH`).
+        network: a :class:`~formation_env.core.network.Network` (or its dict form): analyse the loop over
+            it (laws ``stationary`` and ``linear``); see :func:`network_report` for what is computed.
+        x_leaders: leader positions (n_l, d) (m), for the network quantities that depend on the formation
+            (``drop`` steady error, ``log`` quantiser bound); ignored without a network.
         **params: law parameters (gain, eps, K, Q, rounds), see :func:`make_law`.
 
     Returns:
@@ -277,7 +322,13 @@ def stability_report(
     lam_min, lam_max = extreme_eigenvalues(part)
     if lam_min <= 0:
         raise FormationError(f"Omega_ff is not positive definite (smallest eigenvalue {lam_min:.3g})")
+    net = check_network(network)
+    if net is None and x_leaders is not None:
+        raise TypeError("x_leaders is used only with network= (the drop and log-quantiser quantities); got no network")
     the_law = make_law(law, part, dyn, dt, **params)
+    if net is not None:
+        check_network_law(law)
+        return network_report(part, dyn, dt, law, params, net, x_leaders, (t_lo, t_hi), (lam_min, lam_max))
     if law == "stationary":  # exact from the extreme eigenvalues (no full spectrum for large sparse stresses)
         g = float(params.get("gain", 1.0))
         rho = max(abs(1.0 - dt * g * lam_min), abs(1.0 - dt * g * lam_max))
@@ -432,3 +483,299 @@ def require_stable(the_law: FollowerLaw) -> None:
         raise UnstableParameterError(
             f"law {the_law.name} at T = {the_law.dt:g} s is unstable: closed-loop spectral radius {rho:.6g} >= 1"
         )
+
+
+#: Largest delay (samples) searched for ``delay_max``.
+DELAY_CAP = 64
+
+
+def network_stability(part: Partition, dyn: LinearDynamics, dt: float, G: Any, net: Network) -> float | None:
+    """The loop's per-sample decay factor over ``net`` (quantisation left out), or None when the
+    framework is beyond the analysed size (``simulate`` then skips its warning)."""
+    from .network import loop_model, network_radius
+
+    try:
+        return network_radius(loop_model(part, dyn, G, net), dt)
+    except FormationError:
+        return None
+
+
+def network_report(
+    part: Partition,
+    dyn: LinearDynamics,
+    dt: float,
+    law: str,
+    params: dict[str, Any],
+    net: Network,
+    x_leaders: Any,
+    dt_search: tuple[float, float],
+    lams: tuple[float, float],
+) -> StabilityReport:
+    """``stability_report`` over a network (see docs/networks.md).
+
+    * Delay (no loss, no jitter): rho of the augmented one-step matrix [e(k), .., e(k - d), ...], exact.
+    * Loss (and jitter): the augmented one-step matrix is affine in the independent deliveries theta_e,
+      A = A_0 + sum_e theta_e A_e; mean-square stable iff rho(E[A kron A]) < 1 with
+      E[A kron A] = Abar kron Abar + p (1 - p) sum_e A_e kron A_e (averaged over the period under jitter,
+      Gauss-Legendre), exact. ``spectral_radius`` = sqrt(rho(E[A kron A])).
+    * Jitter without loss: ``stable`` means stable for every period sequence in [T_min, T_max]: exact for
+      the single-integrator loop without delay (commuting matrices), else a common quadratic Lyapunov
+      function (sufficient); ``spectral_radius`` is still the RMS decay under i.i.d. uniform periods.
+    * Quantisation (with a delay at most): uniform: stable iff the loop without quantisation is, and
+      limsup max |e| <= N delta / 2; log: the sector condition delta_rho N < 1 (l-inf small gain,
+      sufficient), N = sum_k ||C A^k E||_inf the gain from what is sent to the formation error.
+    """
+    from .network import (
+        drop_steady_error,
+        jitter_robust,
+        loop_model,
+        network_radius,
+        quantisation_gain,
+    )
+
+    lam_min, lam_max = lams
+    t_lo, t_hi = dt_search
+    if net.quantise is not None and net.random:
+        raise FormationError(
+            "stability_report analyses quantisation alone or with a delay; with loss or jitter as well it is "
+            "not implemented (simulate() runs it)"
+        )
+    xl = None
+    if x_leaders is not None:
+        from .network import as_leader_positions
+
+        xl = as_leader_positions(x_leaders, part.n_l)
+        if xl.shape[1] not in (dyn.d, dyn.q):
+            raise FormationError(f"x_leaders must have shape ({part.n_l}, {dyn.d}) (positions), got {xl.shape}")
+        if xl.shape[1] == dyn.d and dyn.q != dyn.d:
+            xl = dyn.state_from_position(xl)
+
+    def model_at(t: float, network: Network = net) -> Any:
+        the_law = make_law(law, part, dyn, t, **params)
+        return loop_model(part, dyn, the_law.eps * the_law.K, network)  # type: ignore[attr-defined]
+
+    def rho_at(t: float, network: Network = net) -> float:
+        try:
+            return network_radius(model_at(t, network), t)
+        except UnstableParameterError:
+            return math.inf
+
+    model = model_at(dt)
+    the_law = make_law(law, part, dyn, dt, **params)
+    rho = network_radius(model, dt)
+    notes: list[str] = []
+    exact = True
+    stable = rho < 1.0
+    if net.loss > 0:
+        criterion = "mean-square stability, rho(E[A kron A]) < 1 over the independent link losses"
+        if net.jitter is not None:
+            criterion += " and the uniform periods"
+    elif net.jitter is not None:
+        stable, exact, how = jitter_robust(model, dt)
+        criterion = f"stability for every sequence of periods in [{net.jitter[0]:g}, {net.jitter[1]:g}] s: {how}"
+        notes.append(
+            f"with periods drawn i.i.d. uniformly, the RMS error decays by {rho:.6g} per sample "
+            "(sqrt(rho(E[A kron A])), exact mean square); that can hold where some period sequences diverge"
+        )
+    elif net.delay > 0:
+        criterion = f"spectral radius of the augmented one-step matrix over the delay d = {net.delay}"
+    else:
+        criterion = "spectral radius of the closed loop (no delay, loss or jitter)"
+    if net.delay > 0 and net.delayed == "input" and law == "stationary" and net.jitter is None and net.loss == 0:
+        from .network import levin_may_bound
+
+        g = float(params.get("gain", 1.0))
+        bound = levin_may_bound(net.delay)
+        notes.append(
+            f"Levin and May: stable iff 0 < T g lambda_i < 2 sin(pi / (2 (2d + 1))) = {bound:.6g} for every "
+            f"eigenvalue lambda_i of Omega_ff, i.e. T < {bound / (g * lam_max):.6g} s"
+        )
+    ultimate = None
+    if net.quantise is not None:
+        exact = False
+        kind, val = net.quantise
+        n_gain = quantisation_gain(model, dt)
+        if kind == "uniform":
+            ultimate = n_gain * val / 2.0
+            criterion += f"; uniform quantiser: limsup max |e| <= N delta / 2 with N = {n_gain:.6g} (a bound)"
+        else:
+            delta = net.sector or 0.0
+            ok = delta * n_gain < 1.0
+            stable = stable and ok
+            criterion += (
+                f"; log quantiser sector condition delta N < 1 with delta = (1 - rho) / (1 + rho) = {delta:.6g}, "
+                f"N = {n_gain:.6g}: {delta * n_gain:.6g} (l-inf small gain, sufficient)"
+            )
+            if ok and xl is not None:
+                x_star = np.concatenate([xl, part.targets(xl)], axis=0)
+                ultimate = n_gain * delta * float(np.max(np.abs(x_star))) / (1.0 - delta * n_gain)
+            elif ok:
+                notes.append("pass x_leaders for the log quantiser's ultimate bound (it scales with |x|)")
+    steady = None
+    if net.loss > 0 and net.loss_model == "drop":
+        if xl is None:
+            notes.append("pass x_leaders for the steady error the dropped terms leave")
+        else:
+            x_abs = np.zeros((part.n, xl.shape[1]))
+            x_abs[part.leaders] = xl
+            x_abs[part.followers] = part.targets(xl)
+            steady = drop_steady_error(model, dt, x_abs)
+            notes.append(
+                "drop: every link delivers with the same probability 1 - p, so the mean error tends to 0 (no "
+                f"bias in the mean); the dropped terms leave a random error of stationary RMS {steady:.6g}"
+            )
+    delay_max = None
+    if net.delay > 0:
+        delay_max = _largest(lambda d: rho_at(dt, _replace(net, delay=d)) < 1.0, DELAY_CAP)
+        if delay_max == DELAY_CAP:
+            notes.append(f"no delay up to {DELAY_CAP} samples destabilises the loop at this T (delay_max is the cap)")
+    loss_max = None
+    if net.loss > 0:
+        loss_max = _largest_loss(lambda p: rho_at(dt, _replace(net, loss=p)) < 1.0)
+    dt_range = None
+    windows = dt_opt = rho_opt = None
+    if net.jitter is None:
+        windows, dt_opt, rho_opt = stable_windows(lambda t: rho_at(t), t_lo, t_hi, points=120, refine=40)
+        inside = [w for w in windows if w[0] <= dt <= w[1]]
+        if inside:
+            dt_range = (0.0 if inside[0][0] == t_lo else inside[0][0], inside[0][1])
+        elif windows:
+            dt_range = min(windows, key=lambda w: abs(math.log(math.sqrt(w[0] * w[1]) / dt)))
+    else:
+        notes.append("under jitter the periods are given, so no range of T is reported")
+    decay = -math.log(rho) / dt if 0 < rho < 1 else (math.inf if rho == 0 else 0.0)
+    steps = (math.log(1e-6) / math.log(rho) if 0 < rho < 1 else 1.0) if rho < 1 else math.inf
+    eps = getattr(the_law, "eps", None) if law == "linear" else None
+    return StabilityReport(
+        law=law,
+        dt=float(dt),
+        mu_min=-lam_max,
+        mu_max=-lam_min,
+        cond=lam_max / lam_min,
+        spectral_radius=rho,
+        stable=bool(stable),
+        dt_range=dt_range,
+        eps=eps,
+        eps_range=the_law.eps_range() if law == "linear" else None,  # type: ignore[attr-defined]
+        decay_rate=decay,
+        steps_to_1e6=steps,
+        K=np.asarray(the_law.K),  # type: ignore[attr-defined]
+        notes=tuple(notes),
+        windows=windows,
+        dt_opt=dt_opt,
+        rho_opt=rho_opt,
+        dt_search=dt_search,
+        network=net.as_dict(),
+        exact=exact,
+        criterion=criterion,
+        delay_max=delay_max,
+        loss_max=loss_max,
+        steady_error=steady,
+        ultimate_bound=ultimate,
+    )
+
+
+def _replace(net: Network, **changes: Any) -> Network:
+    import dataclasses
+
+    return dataclasses.replace(net, **changes)
+
+
+def _largest(ok: Any, cap: int) -> int | None:
+    """The largest d in 0..cap with ok(d), by doubling then bisection (ok taken monotone decreasing in d).
+    A delay beyond the analysed size stops the search there. None if ok(0) fails."""
+
+    def test(d: int) -> bool | None:
+        try:
+            return bool(ok(d))
+        except FormationError:  # beyond the supported size
+            return None
+
+    if not test(0):
+        return None
+    good, bad = 0, None
+    d = 1
+    while bad is None:
+        d = min(d, cap)
+        res = test(d)
+        if res is None:
+            return good
+        if res:
+            good = d
+            if d == cap:
+                return cap
+            d *= 2
+        else:
+            bad = d
+    while bad - good > 1:
+        mid = (good + bad) // 2
+        res = test(mid)
+        if res is None:
+            return good
+        good, bad = (mid, bad) if res else (good, mid)
+    return good
+
+
+def _largest_loss(ok: Any) -> float:
+    """The largest p in [0, 1) with ok(p), by bisection to 1e-6 (ok taken monotone decreasing)."""
+    if ok(1.0 - 1e-9):
+        return 1.0
+    good, bad = 0.0, 1.0 - 1e-9
+    while bad - good > 1e-6:
+        mid = 0.5 * (good + bad)
+        if ok(mid):
+            good = mid
+        else:
+            bad = mid
+    return good
+
+
+def network_dt_max(
+    omega: Any,
+    leaders: Sequence[int],
+    network: Network | dict[str, Any],
+    law: str = "stationary",
+    dynamics: LinearDynamics | None = None,
+    *,
+    t_lo: float = 1e-3,
+    t_hi: float = 10.0,
+    points: int = 60,
+    **params: Any,
+) -> float:
+    """The largest sampling period (s) of the first stable window of T over ``network`` (no jitter).
+
+    Scans ``points`` log-spaced periods in [t_lo, t_hi] from below and bisects the first loss of stability
+    (60 halvings); ``t_hi`` if none is lost, 0 if already ``t_lo`` is unstable. Stability is
+    :func:`stability_report`'s: rho of the augmented matrix (delays), mean square (loss).
+    """
+    from .network import loop_model, network_radius
+
+    part = Partition(omega, leaders)
+    check_partition(part)
+    net = check_network(network)
+    if net is None:
+        raise TypeError("network must be a Network or a dict of its fields, got None")
+    if net.jitter is not None:
+        raise FormationError("network_dt_max needs a network without jitter (under jitter the periods are given)")
+    check_network_law(law)
+    dyn = check_dynamics(dynamics) if dynamics is not None else LinearDynamics.single_integrator(2)
+    t_lo, t_hi = check_dt(t_lo, "t_lo"), check_dt(t_hi, "t_hi")
+
+    def stable(t: float) -> bool:
+        try:
+            the_law = make_law(law, part, dyn, t, **params)
+        except UnstableParameterError:
+            return False
+        return network_radius(loop_model(part, dyn, the_law.eps * the_law.K, net), t) < 1.0  # type: ignore[attr-defined]
+
+    grid = np.geomspace(t_lo, t_hi, points)
+    if not stable(float(grid[0])):
+        return 0.0
+    for a, b in itertools.pairwise(grid):
+        if not stable(float(b)):
+            good, bad = float(a), float(b)
+            for _ in range(60):
+                mid = 0.5 * (good + bad)
+                good, bad = (mid, bad) if stable(mid) else (good, mid)
+            return good
+    return float(t_hi)

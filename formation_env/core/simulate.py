@@ -11,11 +11,12 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .analysis import require_stable
-from .dynamics import LinearDynamics, check_dynamics
+from .dynamics import LinearDynamics, c2d_zoh, check_dynamics
 from .errors import ControlDimension, LawAssumptionWarning, ReachabilityWarning, StabilityWarning
 from .laws import FollowerLaw, make_law
+from .network import Network, NetworkLoop, check_network, check_network_law
 from .stress import DEFAULT_RTOL, Partition, check_partition
-from .validation import as_array, check_bool, check_dt, check_int, check_rtol
+from .validation import as_array, check_bool, check_dt, check_int, check_rtol, check_seed
 
 __all__ = ["SimResult", "simulate"]
 
@@ -33,7 +34,11 @@ class SimResult:
         targets: follower targets -Omega_ff^-1 Omega_fl x_l (positions), shape (steps + 1, n_f, d).
         errors: follower tracking error ||x_f - x_f*|| over all followers (state), shape (steps + 1,).
         law: the law object, for its analysis (``law.spectral_radius()``).
-        dt: sampling period (s).
+        dt: sampling period (s) (the nominal one under jitter).
+        network: the communication network simulated (None: perfect).
+        periods: with a network, the period of each sample (s), shape (steps,).
+        delivered: with a network, which links delivered at each sample, shape (steps, m), links in the
+            order of :func:`~formation_env.core.network.network_links`.
     """
 
     positions: Array
@@ -43,10 +48,15 @@ class SimResult:
     errors: Array
     law: FollowerLaw
     dt: float
+    network: Network | None = None
+    periods: Array | None = None
+    delivered: NDArray[np.bool_] | None = None
 
     @property
     def times(self) -> Array:
         """Sample times (s), shape (steps + 1,)."""
+        if self.periods is not None:
+            return np.concatenate([[0.0], np.cumsum(self.periods)])
         return np.arange(self.positions.shape[0], dtype=np.float64) * self.dt
 
 
@@ -105,6 +115,8 @@ def simulate(
     return_result: Literal[False] = ...,
     check: bool = ...,
     rtol: float = ...,
+    network: Network | dict[str, Any] | None = ...,
+    seed: int | None = ...,
     **params: Any,
 ) -> Array: ...
 
@@ -124,6 +136,8 @@ def simulate(
     return_result: Literal[True],
     check: bool = ...,
     rtol: float = ...,
+    network: Network | dict[str, Any] | None = ...,
+    seed: int | None = ...,
     **params: Any,
 ) -> SimResult: ...
 
@@ -142,6 +156,8 @@ def simulate(
     return_result: bool = False,
     check: bool = True,
     rtol: float = DEFAULT_RTOL,
+    network: Network | dict[str, Any] | None = None,
+    seed: int | None = None,
     **params: Any,
 ) -> Array | SimResult:
     """Simulate n agents under a follower law for ``steps`` samples of ``dt`` seconds.
@@ -170,6 +186,13 @@ def simulate(
             zero row sums, Omega_ff positive definite) at ``rtol``; ``check=False`` skips it.
         rtol: relative tolerance of that check (``1e-3`` accepts a rounded matrix such as the paper's printed
             one, ``paper_omega(exact=False)``).
+        network: a :class:`~formation_env.core.network.Network` (or its dict form): delay, packet loss,
+            jitter and quantisation between the agents (laws ``stationary`` and ``linear``; the others
+            are refused with the reason). None: the perfect network, exactly the loop above.
+            Under jitter ``dt`` is the nominal period the law is designed for, and a ``leader_path``
+            is read per sample index.
+        seed: seeds ``np.random.default_rng`` for the network's draws (required when it draws: loss or
+            jitter); the same seed gives the same losses and periods.
         **params: law parameters (gain, eps, K, Q, rounds), see ``make_law``.
 
     Returns:
@@ -205,7 +228,20 @@ def simulate(
         x = dyn.state_from_position(x)
     if x.shape[1] != dyn.q:
         raise ControlDimension(f"x0 must have shape ({n}, {dyn.d}) or ({n}, {dyn.q}) for {dyn.name}, got {x.shape}")
+    net = check_network(network)
+    if seed is not None:
+        seed = check_seed(seed)
     the_law = make_law(law, part, dyn, dt, **params)
+    if net is not None:
+        check_network_law(law)
+        if net.random and seed is None:
+            raise TypeError(
+                "seed must be given (a non-negative integer) when the network draws random losses or periods; "
+                "the same seed gives the same draws"
+            )
+        return _simulate_network(
+            part, dyn, x, the_law, net, seed, steps, leader_path, require_stable_law, return_result
+        )
     if not the_law.tracks_targets:
         warnings.warn(
             f"law {law} is the paper's literal eq. 25, kept for comparison: it does not converge to the affine "
@@ -291,4 +327,94 @@ def simulate(
         errors=err,
         law=the_law,
         dt=float(dt),
+    )
+
+
+def _simulate_network(
+    part: Partition,
+    dyn: LinearDynamics,
+    x: Array,
+    the_law: FollowerLaw,
+    net: Network,
+    seed: int | None,
+    steps: int,
+    leader_path: Callable[[int], ArrayLike] | None,
+    require_stable_law: bool,
+    return_result: bool,
+) -> Array | SimResult:
+    """``simulate`` over a network: the :class:`NetworkLoop` step, the draws of :meth:`Network.draw`."""
+    from .analysis import network_stability
+
+    dt = the_law.dt
+    G = the_law.eps * the_law.K  # type: ignore[attr-defined]
+    rho = network_stability(part, dyn, dt, G, net)
+    if rho is not None and rho >= 1.0:
+        msg = (
+            f"law {the_law.name} at T = {dt:g} s over {net} is unstable (decay factor per sample {rho:.6g} >= 1); "
+            "see stability_report(..., network=)"
+        )
+        if require_stable_law:
+            from .errors import UnstableParameterError
+
+            raise UnstableParameterError(msg)
+        warnings.warn(msg, StabilityWarning, stacklevel=3)
+    loop = NetworkLoop(part, G, net)
+    rng = np.random.default_rng(seed) if net.random else None
+    n, n_l = part.n, part.n_l
+    states = np.empty((steps + 1, n, dyn.q))
+    inputs = np.zeros((steps, n, dyn.p))
+    periods = np.empty(steps)
+    delivered = np.ones((steps, loop.m), dtype=bool)
+    path = _PathStates(dyn, n_l, dt) if leader_path is not None else None
+    prev_pos = None
+    if path is not None:
+        xl0, _ = path(leader_path(0), 0, None)  # type: ignore[misc]
+        x = x.copy()
+        x[part.leaders] = xl0
+        prev_pos = dyn.position(xl0)
+    states[0] = x
+    st = loop.initial_state(x)
+    eye_q = np.eye(dyn.q)
+    for k in range(steps):
+        if rng is not None:
+            t_k, delivered[k] = net.draw(rng, dt, loop.m)
+        else:
+            t_k = dt
+        periods[k] = t_k
+        if net.jitter is None or dyn.discrete:
+            a_d, b_d = dyn.zoh(t_k)
+        elif not np.any(dyn.A):  # integrators: exp(0) = I, B_d = T B, no matrix exponential per sample
+            a_d, b_d = eye_q, t_k * dyn.B
+        else:
+            a_d, b_d = c2d_zoh(dyn.A, dyn.B, t_k)
+        if path is None:
+            u_l = np.zeros((n_l, dyn.p))
+            xl_next = None
+        else:
+            xl_next, _ = path(leader_path(k + 1), k + 1, prev_pos)  # type: ignore[misc]
+            prev_pos = dyn.position(xl_next)
+            u_l = (xl_next - st.x[part.leaders] @ a_d.T) @ np.linalg.pinv(b_d).T
+        st, u_f = loop.step(st, delivered[k], a_d, b_d, u_l)
+        if xl_next is not None:
+            st.x[part.leaders] = xl_next
+        states[k + 1] = st.x
+        inputs[k, part.leaders] = u_l
+        inputs[k, part.followers] = u_f
+    positions = dyn.position(states)
+    if not return_result:
+        return positions
+    tgt_states = part.targets(states[:, part.leaders])
+    with np.errstate(over="ignore", invalid="ignore"):
+        err = np.linalg.norm((states[:, part.followers] - tgt_states).reshape(steps + 1, -1), axis=1)
+    return SimResult(
+        positions=positions,
+        states=states,
+        inputs=inputs,
+        targets=dyn.position(tgt_states),
+        errors=err,
+        law=the_law,
+        dt=float(dt),
+        network=net,
+        periods=periods,
+        delivered=delivered,
     )

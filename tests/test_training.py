@@ -364,3 +364,34 @@ def test_checkpoint_count_is_checked_before_training(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"checkpoints must be an integer >= 1, got 2\.5"):
         train("ppo", "shared", out=tmp_path, smoke=True, checkpoints=2.5)  # type: ignore[arg-type]
     assert not (tmp_path / "tb").exists()
+
+
+def test_thread_count_is_checked_before_training(tmp_path: Path) -> None:
+    for bad in (0, 1.5, True):
+        with pytest.raises(ValueError, match=r"threads must be an integer >= 1, got " + str(bad).replace(".", r"\.")):
+            train("ppo", "shared", out=tmp_path, smoke=True, threads=bad)  # type: ignore[arg-type]
+    assert not (tmp_path / "tb").exists()
+
+
+@pytest.mark.slow
+def test_a_run_uses_its_threads_and_records_them_the_machine_and_its_command(tmp_path: Path) -> None:
+    """``--threads`` reaches torch and numba, and the config says what the run's wall time was measured on and the
+    command that made it; without the flag a run takes every usable core."""
+    import json
+
+    import numba
+    import torch
+
+    from train.leaders import parse_run, usable_cores
+
+    argv = ["--mode", "shared", "--scenario", "hold", "--smoke", "--threads", "1", "--out", str(tmp_path)]
+    run = parse_run(argv)
+    assert run["threads"] == 1 and run["command"] == "python -m train.leaders " + " ".join(argv)
+    cfg = train(**run)
+    assert torch.get_num_threads() == 1 and numba.get_num_threads() == 1
+    saved = json.loads((tmp_path / "hold_shared_config.json").read_text())
+    assert saved["threads"] == cfg["threads"] == 1 and saved["command"] == run["command"]
+    assert {"cpu", "cores", "python", "torch", "numpy", "numba", "stable_baselines3"} <= set(saved["machine"])
+    assert saved["machine"]["cores"] == usable_cores()
+    assert train("ppo", "shared", "hold", out=tmp_path / "all", smoke=True)["threads"] == usable_cores()
+    assert torch.get_num_threads() == usable_cores()

@@ -129,3 +129,9 @@ def test_progress_bar_shows_on_a_terminal_or_when_asked(capsys) -> None:
             bar.update(3)
     err = capsys.readouterr().err
     assert "bar-True" in err and "bar-None" not in err and "bar-False" not in err
+
+
+def test_bench_train_refuses_only(capsys, tmp_path) -> None:
+    """``bench --train`` runs benchmarks.train_bench alone (tests/test_train_bench.py runs its quick mode)."""
+    assert main(["bench", "--train", "--only", "core", "--out", str(tmp_path)]) == 2
+    assert "drop --only" in capsys.readouterr().err

@@ -102,7 +102,8 @@ def _resets():
 def test_bad_seeds_refused_at_reset(which, seed, error, match):
     if which == "gymnasium_vec" and isinstance(seed, list):  # one seed per env (as SyncVectorEnv): B = 2 is right
         _resets()[which](seed=seed)
-        error, match, seed = FormationError, "seed must be an int, None or a list of 2 seeds, got a list of 3", [1, 2, 3]
+        error, seed = FormationError, [1, 2, 3]
+        match = "seed must be an int, None or a list of 2 seeds, got a list of 3"
     with pytest.raises(error, match=match):
         _resets()[which](seed=seed)
 

@@ -55,9 +55,8 @@ def test_make_vec_default_is_the_batched_env(env_id):
     assert venv.single_observation_space == sync.single_observation_space
     assert venv.single_action_space == sync.single_action_space
     assert venv.observation_space == sync.observation_space and venv.action_space == sync.action_space
-    assert venv.spec is not None and venv.spec.id == env_id and venv.spec.kwargs["vectorization_mode"] == (
-        "vector_entry_point"
-    )
+    assert venv.spec is not None and venv.spec.id == env_id
+    assert venv.spec.kwargs["vectorization_mode"] == "vector_entry_point"
     obs, _ = venv.reset(seed=0)
     assert venv.observation_space.contains(obs)
 
@@ -117,7 +116,7 @@ def test_disabled_autoreset_and_reset_mask_equal_sync_vector_env():
         got, want = venv.step(act), sync.step(act)
         _same(got, want, "step")
     assert got[3].all()
-    with pytest.raises(FormationError, match="DISABLED.*reset_mask"):
+    with pytest.raises(FormationError, match=r"DISABLED.*reset_mask"):
         venv.step(act)
     mask = np.array([True, False, True])
     _same(venv.reset(seed=[5, None, 6], options={"reset_mask": mask}),

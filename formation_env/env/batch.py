@@ -172,7 +172,9 @@ class FormationBatch:
         """Give env b the generator ``default_rng(seeds[b])``; a None keeps env b's generator (fresh entropy if it
         has none yet), as a Gymnasium env's ``reset(seed=None)`` does."""
         if len(seeds) != self.n_envs:
-            raise FormationError(f"seed must be an int, None or a list of {self.n_envs} seeds, got a list of {len(seeds)}")
+            raise FormationError(
+                f"seed must be an int, None or a list of {self.n_envs} seeds, got a list of {len(seeds)}"
+            )
         fresh = np.random.SeedSequence().spawn(self.n_envs)
         self._rngs = [
             np.random.default_rng(check_seed(s))

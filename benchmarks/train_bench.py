@@ -4,8 +4,8 @@
 ``formation-env bench --train``). Each recipe of ``train/configs/*.yaml`` trains through the same code path as
 ``python -m train.leaders --config RECIPE --timesteps N`` (:func:`train.leaders.parse_run`, then
 :func:`train.leaders.train`, without the evaluation after it) and, beside them, SB3 PPO with the settings of the
-peer recipe (``--peer-recipe``, default the shared-policy passage recipe: its hyperparameters, network, copies
-and the same ``VecNormalize(VecMonitor(...))`` stack) on MPE2 ``simple_spread_v3`` (N = 3, continuous actions)
+peer recipe (``--peer-recipe``, default the shared-policy passage recipe: its hyperparameters, network, copies,
+threads as ``train.leaders`` sets them, and the same ``VecNormalize(VecMonitor(...))`` stack) on MPE2 ``simple_spread_v3`` (N = 3, continuous actions)
 through SuperSuit (``pettingzoo_env_to_vec_env_v1`` and ``concat_vec_envs_v1``, one shared policy over every
 agent: the route PettingZoo users take).
 
@@ -132,7 +132,7 @@ def _row(name: str, cfg: dict[str, Any], timer: TimeShares) -> Row:
         "wall_s": timer.wall,
         "steps_per_s": timer.timesteps / timer.wall,
         "shares": timer.shares(),
-        "torch_threads": torch.get_num_threads(),
+        "torch_threads_update": torch.get_num_threads(),  # after learn: the update's
         "numba_threads": numba.get_num_threads(),
     }
 
@@ -174,15 +174,22 @@ def bench_recipe(path: Path, steps: int, quick: bool, workdir: Path) -> Row:
 
 def bench_peer(steps: int, quick: bool, recipe: Path, seed: int = 0) -> Row:
     """SB3 PPO with ``recipe``'s settings on MPE2 ``simple_spread_v3`` through SuperSuit, timed as the recipes."""
-    import numba
     import supersuit as ss
-    import torch
     from mpe2 import simple_spread_v3
     from stable_baselines3 import PPO
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from train.leaders import ALGO_DEFAULTS, POLICY_DEFAULTS, SMOKE_OVERRIDES, load_config, schedules
+    from train.leaders import (
+        ALGO_DEFAULTS,
+        POLICY_DEFAULTS,
+        SMOKE_OVERRIDES,
+        UpdateThreads,
+        load_config,
+        schedules,
+        set_threads,
+        usable_cores,
+    )
 
     cfg = load_config(recipe)
     if cfg.get("algo", "ppo") != "ppo":
@@ -193,8 +200,8 @@ def bench_peer(steps: int, quick: bool, recipe: Path, seed: int = 0) -> Row:
         steps, n_envs = min(steps, 1024), min(n_envs, 4)
         hp.update(SMOKE_OVERRIDES["ppo"])
     pk = {**POLICY_DEFAULTS["ppo"], **cfg.get("policy_kwargs", {})}
-    # as train.leaders sets them for its runs (this process has run the recipes with them)
-    torch_threads, numba_threads = torch.get_num_threads(), numba.get_num_threads()
+    threads = int(cfg.get("threads") or usable_cores())  # as train.leaders: torch and numba on them, ...
+    set_threads(threads)
     env = ss.pettingzoo_env_to_vec_env_v1(simple_spread_v3.parallel_env(continuous_actions=True))
     raw = ss.concat_vec_envs_v1(env, n_envs, num_cpus=0, base_class="stable_baselines3")
     raw.venv.reset(seed=seed)  # SuperSuit's vec env has no seed(): seed its envs once, SB3 resets them unseeded
@@ -204,11 +211,11 @@ def bench_peer(steps: int, quick: bool, recipe: Path, seed: int = 0) -> Row:
     model = PPO("MlpPolicy", venv, policy_kwargs=pk, device="cpu", verbose=0, **schedules(hp))
     model.action_space.seed(seed)
     timer = TimeShares()
-    model.learn(int(steps), callback=timer)
+    model.learn(int(steps), callback=[UpdateThreads(threads), timer])  # ... torch on one while collecting
     venv.close()
     peer = {"algo": "ppo", "mode": "shared", "scenario": "simple_spread"}
     row = _row("mpe2 simple_spread_v3 N=3 (SuperSuit)", peer, timer)
-    row.update(settings_of=recipe.stem, torch_threads=torch_threads, numba_threads=numba_threads)
+    row.update(settings_of=recipe.stem)
     return row
 
 

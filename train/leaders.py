@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import re
 import shlex
 import sys
@@ -41,6 +42,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+# Idle OpenMP threads sleep instead of spinning: torch's and numba's thread pools (both OpenMP) take turns in
+# a training step, and a pool spinning after its work holds a core the other needs (measured: a narrow_passage
+# commander run 1.9x slower on two cores; docs/learning.md). Before torch is loaded; a user's own setting wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper, VecMonitor, VecNormalize
 
@@ -87,8 +94,66 @@ SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
 CONFIG_KEYS = (
     "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
     "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum", "action_mode", "central_critic",
-    "checkpoints",
+    "checkpoints", "threads",
 )  # fmt: skip
+
+
+def usable_cores() -> int:
+    """The CPU cores this process may run on (its affinity mask; ``os.cpu_count()`` where there is none)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not on Linux
+        return os.cpu_count() or 1
+
+
+def set_threads(threads: int) -> None:
+    """Run torch and the env's compiled step (numba's worker threads) on ``threads`` threads each (numba's at most
+    its pool, ``NUMBA_NUM_THREADS``)."""
+    import numba
+    import torch
+
+    torch.set_num_threads(threads)
+    numba.set_num_threads(min(threads, numba.config.NUMBA_NUM_THREADS))
+
+
+class UpdateThreads(BaseCallback):
+    """torch on one thread while collecting rollouts, on ``threads`` for the update. A rollout step's forward pass
+    is a few small matrix products, for which a second thread costs more in hand-over than it saves (measured:
+    docs/learning.md); the env's compiled step keeps its own ``threads`` throughout."""
+
+    def __init__(self, threads: int) -> None:
+        super().__init__()
+        self.threads = threads
+
+    def _on_rollout_start(self) -> None:
+        import torch
+
+        torch.set_num_threads(1)
+
+    def _on_rollout_end(self) -> None:
+        import torch
+
+        torch.set_num_threads(self.threads)
+
+    def _on_step(self) -> bool:
+        return True
+
+
+def machine() -> dict[str, Any]:
+    """What a run's wall time was measured on: CPU model, cores usable, Python and the main packages' versions."""
+    import platform
+    from importlib.metadata import version
+
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:  # pragma: no cover - not on Linux
+        pass
+    pkgs = {p: version(p) for p in ("torch", "numpy", "numba", "stable_baselines3")}
+    return {"cpu": cpu, "cores": usable_cores(), "python": platform.python_version(), **pkgs}
 
 
 def load_config(path: str | Path) -> dict[str, Any]:
@@ -353,6 +418,8 @@ def train(
     action_mode: str = "leaders",
     central_critic: bool = False,
     checkpoints: int = 4,
+    threads: int | None = None,
+    command: str = "",
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -378,15 +445,16 @@ def train(
         central_critic: (shared PPO) the critic reads the global state too, the actor only the leader's own
             observation (MAPPO's split, :class:`agents.central_critic.LocalActorPolicy`).
         checkpoints: how many checkpoints to save in ``checkpoints/``, evenly spaced over the run.
+        threads: CPU threads of torch and of the env's compiled step (None: every core this process may use,
+            :func:`usable_cores`); give each of several runs side by side its share.
+        command: the command line that started the run (recorded in the config).
     """
-    import numba
-    import torch
+    threads = usable_cores() if threads is None else threads
+    if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
+        raise ValueError(f"threads must be an integer >= 1, got {threads!r}")
+    set_threads(threads)
     from stable_baselines3 import PPO, SAC
 
-    torch.set_num_threads(1)
-    # One core per run: numba's worker threads (the step's threaded kernel, from 64 envs on) compete with torch,
-    # and a run sharing the machine with others slows many times over.
-    numba.set_num_threads(1)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     from formation_env.env.versions import with_version
@@ -439,7 +507,7 @@ def train(
     )
     if progress_bar is None:
         progress_bar = sys.stdout.isatty() and not smoke
-    callbacks: list[BaseCallback] = [curve, ckpt, *extra_callbacks]
+    callbacks: list[BaseCallback] = [curve, ckpt, UpdateThreads(threads), *extra_callbacks]
     if curriculum is not None:
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:
@@ -466,7 +534,9 @@ def train(
         "env_kwargs": env_kwargs,
         "observation": "global_state" if mode == "commander" else "leader_observation",
         "wall_time_s": round(wall, 1),
-        "command": "python -m train.leaders " + shlex.join(sys.argv[1:]) if sys.argv[0].endswith("leaders.py") else "",
+        "command": command,
+        "threads": threads,
+        "machine": machine(),
         "algo_kwargs": hp,
         "sb3_policy_kwargs": pk,
         "config_file": config_file,
@@ -539,6 +609,10 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         help="shared PPO: the critic also reads the global state, the actor only the leader's observation (MAPPO)",
     )  # fmt: skip
     p.add_argument("--checkpoints", type=int, default=None, help="checkpoints saved over the run; default 4")
+    p.add_argument(
+        "--threads", type=int, default=None,
+        help="CPU threads of torch and the env step; default every usable core (give runs side by side a share)",
+    )  # fmt: skip
     p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
     p.add_argument(
         "--curriculum",
@@ -552,7 +626,7 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
     except (FileNotFoundError, ValueError) as exc:
         p.error(str(exc))
     keys = ("algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "eval_episodes", "env_version",
-            "action_mode", "central_critic", "checkpoints")  # fmt: skip
+            "action_mode", "central_critic", "checkpoints", "threads")  # fmt: skip
     for key in keys:
         if getattr(a, key) is not None:
             cfg[key] = getattr(a, key)
@@ -569,7 +643,8 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         if len(cur) != 2:
             p.error(f"--curriculum must be FACTOR:FRACTION, got {a.curriculum!r}")
         cfg["curriculum"] = cur
-    return {**cfg, "out": a.out, "smoke": a.smoke, "config_file": a.config}
+    command = shlex.join(["python", "-m", "train.leaders", *(sys.argv[1:] if argv is None else argv)])
+    return {**cfg, "out": a.out, "smoke": a.smoke, "config_file": a.config, "command": command}
 
 
 def main(argv: Sequence[str] | None = None, prog: str = "python -m train.leaders") -> int:

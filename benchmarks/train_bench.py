@@ -5,9 +5,9 @@
 ``python -m train.leaders --config RECIPE --timesteps N`` (:func:`train.leaders.parse_run`, then
 :func:`train.leaders.train`, without the evaluation after it) and, beside them, SB3 PPO with the settings of the
 peer recipe (``--peer-recipe``, default the shared-policy passage recipe: its hyperparameters, network, copies,
-threads as ``train.leaders`` sets them, and the same ``VecNormalize(VecMonitor(...))`` stack) on MPE2 ``simple_spread_v3`` (N = 3, continuous actions)
-through SuperSuit (``pettingzoo_env_to_vec_env_v1`` and ``concat_vec_envs_v1``, one shared policy over every
-agent: the route PettingZoo users take).
+threads as ``train.leaders`` sets them, and the same ``VecNormalize(VecMonitor(...))`` stack) on MPE2
+``simple_spread_v3`` (N = 3, continuous actions) through SuperSuit (``pettingzoo_env_to_vec_env_v1`` and
+``concat_vec_envs_v1``, one shared policy over every agent: the route PettingZoo users take).
 
 Per run: timesteps/s of ``learn`` with its updates, and the shares of its wall time spent in the env's step (the
 outermost VecEnv's ``step_async`` and ``step_wait``: the env, its wrappers and normalisation), in the policy's

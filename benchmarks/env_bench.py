@@ -11,6 +11,11 @@
 * (d) The env on ``trilateration(10_000, 2)``: step time and peak RSS in a fresh process. Floors <= 10 ms and
   <= 500 MB.
 * (e) ``moving_obstacles`` step against ``obstacle_field`` step (PettingZoo, B = 1). Floor: at most 2x the time.
+* (f) ``gym.make_vec("formation_env/NarrowPassage-v1", num_envs=64)``: the batched env (its
+  ``vector_entry_point``, the default) against ``vectorization_mode="sync"`` (Gymnasium's ``SyncVectorEnv`` of 64
+  single envs), both ``NEXT_STEP`` auto-reset with 20-step episodes so that resets are part of the time; and the
+  batched env on one numba thread (from B = 64 its step runs on numba's threads, which lose much when the cores
+  are shared). No floor.
 
 Each comparison alternates ours and the peer turn by turn (A B, B A, ...); ratios are of medians, with the
 min-max of the per-turn ratios. Peers come from the optional extra ``bench`` (``pip install -e ".[bench]"``).
@@ -235,6 +240,50 @@ def bench_batched(quick: bool, B: int = 1024) -> list[Row]:
     return _compare_rows("b", rates, "ours", "env-steps/s", 10.0, labels)
 
 
+def bench_make_vec(quick: bool, n: int = 64) -> list[Row]:
+    """(f) ``gym.make_vec`` of a Gymnasium id: the batched env against Gymnasium's loop over single envs."""
+    import gymnasium as gym
+
+    import formation_env
+
+    env_id = formation_env.SCENARIO_IDS_V1["narrow_passage"]
+    rng = np.random.default_rng(0)
+    fns: dict[str, Callable[[], None]] = {}
+    for name, mode in (("batched", "vector_entry_point"), ("sync", "sync")):
+        venv = gym.make_vec(env_id, num_envs=n, vectorization_mode=mode, max_episode_steps=20)
+        venv.reset(seed=0)
+        acts = [rng.uniform(-1, 1, venv.action_space.shape).astype(np.float32) for _ in range(8)]
+        count = [0]
+
+        def step(venv: Any = venv, acts: list[Any] = acts, count: list[int] = count) -> None:
+            venv.step(acts[count[0] & 7])
+            count[0] += 1
+
+        fns[name] = step
+
+    import numba
+
+    def one_thread(step: Callable[[], None] = fns["batched"]) -> None:
+        threads = numba.get_num_threads()
+        numba.set_num_threads(1)
+        try:
+            step()
+        finally:
+            numba.set_num_threads(threads)
+
+    fns["batched_1"] = one_thread
+    labels = {
+        "batched": f"gym.make_vec({env_id!r}, num_envs={n}): the batched env (vector_entry_point, the default)",
+        "sync": f"the same with vectorization_mode='sync' (SyncVectorEnv of {n} gym.make envs)",
+        "batched_1": "the batched env with numba.set_num_threads(1) (as a training process sets it)",
+    }
+    rates = _rates(fns, dict.fromkeys(fns, float(n)), 20 if quick else 50, 3 if quick else 7, turn_s=0.2)
+    rows = []
+    for ours in ("batched", "batched_1"):  # each against the same sync turns
+        rows += _compare_rows("f", {ours: rates[ours], "sync": rates["sync"]}, ours, "env-steps/s", None, labels)
+    return rows
+
+
 def bench_ppo_here(quick: bool) -> list[Row]:
     """PPO ``learn`` timesteps/s in this process, torch on 1 thread (a 64x64 MLP gains nothing from more; on a shared
     machine more threads made the spread of repeats 15x wider)."""
@@ -361,7 +410,7 @@ def bench_ppo(quick: bool) -> list[Row]:
 def run(quick: bool = False) -> list[Row]:
     """All env benchmarks, section by section."""
     rows: list[Row] = []
-    for fn in (bench_parallel, bench_batched, bench_ppo, bench_large, bench_moving):
+    for fn in (bench_parallel, bench_batched, bench_ppo, bench_large, bench_moving, bench_make_vec):
         print(f"[env] {fn.__name__} ...", file=sys.stderr, flush=True)
         with contextlib.suppress(KeyboardInterrupt):
             rows += fn(quick)

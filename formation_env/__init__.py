@@ -7,7 +7,8 @@ Gymnasium ids
 -------------
 ``formation_env/FormationCommander-v0`` takes the scenario as a keyword (no step limit of its
 own beyond the env's ``max_cycles``); one id per scenario fixes it, with ``max_episode_steps=400``
-(:data:`SCENARIO_IDS` lists them)::
+(:data:`SCENARIO_IDS` lists them). ``gym.make_vec(id, num_envs=N)`` steps N of them as one batch
+(:data:`VECTOR_ENTRY_POINT`; ``vectorization_mode="sync"`` gives Gymnasium's loop over N single envs)::
 
     import gymnasium as gym
 
@@ -39,6 +40,7 @@ __all__ = [
     "MAX_EPISODE_STEPS",
     "SCENARIO_IDS",
     "SCENARIO_IDS_V1",
+    "VECTOR_ENTRY_POINT",
     "register_gymnasium",
 ]
 
@@ -70,6 +72,10 @@ SCENARIO_IDS_V1: dict[str, str] = {name: env_id[: -len("-v0")] + "-v1" for name,
 COMMANDER_ID_V1 = "formation_env/FormationCommander-v1"
 VERSIONED_ENTRY_POINT = "formation_env.env.commander:versioned"
 
+#: The ``vector_entry_point`` of every id: ``gym.make_vec(id, num_envs=N)`` steps the N envs as one batch
+#: (``formation_env.env.batch.GymnasiumFormationVecEnv``), env b replaying ``gym.make(id)`` seeded ``seed + b``.
+VECTOR_ENTRY_POINT = "formation_env.env.commander:vector"
+
 
 def register_gymnasium(gymnasium: ModuleType | None = None) -> None:
     """Register :data:`COMMANDER_ID` and every id of :data:`SCENARIO_IDS` with Gymnasium (idempotent).
@@ -82,9 +88,14 @@ def register_gymnasium(gymnasium: ModuleType | None = None) -> None:
         import gymnasium as gym
     registry = gym.registry
     if COMMANDER_ID not in registry:
-        gym.register(id=COMMANDER_ID, entry_point=COMMANDER_ENTRY_POINT)
+        gym.register(id=COMMANDER_ID, entry_point=COMMANDER_ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT)
     if COMMANDER_ID_V1 not in registry:
-        gym.register(id=COMMANDER_ID_V1, entry_point=VERSIONED_ENTRY_POINT, kwargs={"version": 1})
+        gym.register(
+            id=COMMANDER_ID_V1,
+            entry_point=VERSIONED_ENTRY_POINT,
+            vector_entry_point=VECTOR_ENTRY_POINT,
+            kwargs={"version": 1},
+        )
     for ids, entry, extra in (
         (SCENARIO_IDS, COMMANDER_ENTRY_POINT, {}),
         (SCENARIO_IDS_V1, VERSIONED_ENTRY_POINT, {"version": 1}),
@@ -94,6 +105,7 @@ def register_gymnasium(gymnasium: ModuleType | None = None) -> None:
                 gym.register(
                     id=env_id,
                     entry_point=entry,
+                    vector_entry_point=VECTOR_ENTRY_POINT,
                     max_episode_steps=MAX_EPISODE_STEPS,
                     kwargs={"scenario": scenario, **extra},
                 )

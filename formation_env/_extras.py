@@ -11,7 +11,7 @@ else comes with an extra (see ``[project.optional-dependencies]`` in ``pyproject
     rllib    ray[rllib]                               formation_env.integrations.rllib
     torchrl  torchrl, tensordict                      TorchRL
     benchmarl  benchmarl (torchrl 0.10-0.11)          formation_env.integrations.benchmarl
-    bench    mpe2, vmas                               the peer benchmarks
+    bench    mpe2, vmas, supersuit                    the peer benchmarks
 
 A function that needs one calls :func:`require` where it would import the module::
 
@@ -41,7 +41,7 @@ EXTRAS: dict[str, tuple[str, ...]] = {
     "rllib": ("ray",),
     "torchrl": ("torchrl", "tensordict"),
     "benchmarl": ("benchmarl",),
-    "bench": ("mpe2", "vmas"),
+    "bench": ("mpe2", "vmas", "supersuit"),
 }
 
 

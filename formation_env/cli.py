@@ -52,7 +52,14 @@ def cmd_report(args: argparse.Namespace) -> int:
 
 
 def cmd_bench(args: argparse.Namespace) -> int:
-    """Run the benchmark suite (benchmarks/) and write BENCHMARKS.md into the ``--out`` folder."""
+    """Run the benchmark suite (benchmarks/) and write BENCHMARKS.md into the ``--out`` folder; with ``--train``,
+    the training benchmark instead (``benchmarks.train_bench``: train_bench.md and .json)."""
+    if args.train:
+        if args.only:
+            raise ValueError("bench --train runs the training benchmark alone: drop --only")
+        from benchmarks.train_bench import main as train_bench_main
+
+        return train_bench_main(["--out", args.out] + (["--quick"] if args.quick else []))
     from benchmarks.__main__ import main as bench_main
 
     argv = ["--out", args.out] + (["--quick"] if args.quick else []) + (["--only", *args.only] if args.only else [])
@@ -167,7 +174,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--only", nargs="*", choices=["core", "design", "env", "conditioning"], help="sections (default: all)"
     )
-    p.add_argument("--quick", action="store_true", help="fewer repeats")
+    p.add_argument("--quick", action="store_true", help="fewer repeats (with --train: the recipes' smoke runs)")
+    p.add_argument(
+        "--train",
+        action="store_true",
+        help="time end-to-end training of every recipe beside PPO on MPE2 through SuperSuit "
+        "(python -m benchmarks.train_bench has more options)",
+    )
     p.add_argument(
         "--out", default="out", help="folder of the BENCHMARKS.md written (--out . rewrites the committed one)"
     )

@@ -166,3 +166,9 @@ def test_leaderboard_writes_into_an_out_folder_and_the_projects_table_is_one_fla
     assert (proj / "README.md").read_text() == f"intro\n\n{summary_table(board)}\n\nafter\n"
     with pytest.raises(FileNotFoundError, match=r"is not one \(no README.md or docs/ in it\): run from a clone"):
         write_project(board, "", tmp_path / "none")
+
+
+def test_bench_train_refuses_only(capsys, tmp_path) -> None:
+    """``bench --train`` runs benchmarks.train_bench alone (tests/test_train_bench.py runs its quick mode)."""
+    assert main(["bench", "--train", "--only", "core", "--out", str(tmp_path)]) == 2
+    assert "drop --only" in capsys.readouterr().err

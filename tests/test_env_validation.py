@@ -100,6 +100,10 @@ def _resets():
     ],
 )
 def test_bad_seeds_refused_at_reset(which, seed, error, match):
+    if which == "gymnasium_vec" and isinstance(seed, list):  # one seed per env (as SyncVectorEnv): B = 2 is right
+        _resets()[which](seed=seed)
+        error, seed = FormationError, [1, 2, 3]
+        match = "seed must be an int, None or a list of 2 seeds, got a list of 3"
     with pytest.raises(error, match=match):
         _resets()[which](seed=seed)
 
@@ -177,7 +181,7 @@ def test_vec_env_refuses_complex_actions_and_foreign_objects():
         venv.step(np.zeros((venv.num_envs, venv.p)) * 1j)
     with pytest.raises(TypeError, match="engine must be an Engine"):
         FormationVecEnv(engine=5)
-    with pytest.raises(TypeError, match="venv must be a FormationVecEnv, got NoneType"):
+    with pytest.raises(TypeError, match="venv must be a FormationVecEnv or FormationBatch, got NoneType"):
         GymnasiumFormationVecEnv(None)
     with pytest.raises(AttributeError, match="attr_name 'nope' is an attribute of neither"):
         venv.get_attr("nope")

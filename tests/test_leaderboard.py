@@ -83,12 +83,14 @@ def test_metrics_are_means_and_worst_values_are_apart() -> None:
         "collision": np.array([False, False, True, False]),
         "time_to_goal": np.array([2.0, 4.0, np.nan, np.nan]),
         "mean_formation_err": np.array([0.01, 0.02, 0.03, 0.04]),
-        "max_formation_err": np.array([0.1, 0.2, 0.3, 0.6]),
+        "max_formation_err": np.array([0.1, 0.2, 0.6, np.nan]),  # the last episode never formed
+        "tracking_err": np.array([0.5, 0.1, 0.2, 0.2]),
         "min_clearance": np.array([0.5, 0.4, -0.1, 0.2]),
         "control_effort": np.ones(4),
     }
     metrics, cis, worst = summarise(res)
     assert metrics["max_formation_err"] == pytest.approx(0.3) and worst["max_formation_err"] == 0.6
+    assert metrics["tracking_err"] == pytest.approx(0.25) and worst["tracking_err"] == 0.5
     assert metrics["min_clearance"] == pytest.approx(0.25) and worst["min_clearance"] == -0.1
     assert metrics["time_to_goal"] == 3.0 and worst["time_to_goal"] == 4.0
     lo, hi = cis["max_formation_err"]
@@ -216,3 +218,57 @@ def test_shipped_policy_is_what_its_recorded_command_trains(path: Path) -> None:
     assert with_version(run.get("env_version", 0), run.get("env_kwargs", {})) == shipped["env_kwargs"]
     assert run.get("algo_kwargs", {}).items() <= shipped.get("algo_kwargs", {}).items()
     assert run.get("policy_kwargs", {}).items() <= shipped.get("sb3_policy_kwargs", {}).items()
+
+
+#: (scenario, engine arguments, whether the team forms): the stationary law lags moving leaders by more than 5 mm.
+FORMING = [("maneuver", {}, True), ("hold", {"dynamics": "single_integrator", "follower_law": "stationary"}, False)]
+
+
+@pytest.mark.parametrize(("scenario", "kwargs", "forms"), FORMING)
+def test_formed_error_and_tracking_error_follow_their_definitions(scenario: str, kwargs: dict, forms: bool) -> None:
+    """``max_formation_err`` is the largest error from the first sample at or below FORMED_FRACTION x formation_tol
+    (the reset counts), ``tracking_err`` the mean over the episode's samples of the largest distance to the
+    reference, both recomputed here from the engine's own step by step."""
+    from agents.rollout import FORMED_FRACTION
+
+    eng = Engine(scenario, max_cycles=60, **kwargs)
+    pol = AnalyticPolicy(eng)
+    seeds = list(range(5))
+    res = run_batch(eng, pol.act_engine, seeds)
+    tol = FORMED_FRACTION * eng.scenario.formation_tol
+    for b, s in enumerate(seeds):
+        state = reset_paired(eng, [s])
+        obs = eng.observe(state)
+        errs, times, far = [float(state.err[0])], [0.0], []
+        for _ in range(int(res["steps"][b])):
+            state, obs, _, _, _, info = eng.step(state, pol.act_engine(eng, state, obs))
+            errs.append(float(info["formation_error"][0]))
+            times.append(float(info["time"][0]))
+            far.append(float(info["goal_distance"][0]))
+        below = [i for i, e in enumerate(errs) if e <= tol]
+        if below:
+            assert res["formed_time"][b] == pytest.approx(times[below[0]])
+            assert res["max_formation_err"][b] == pytest.approx(max(errs[below[0] :]))
+        else:
+            assert np.isnan(res["formed_time"][b]) and np.isnan(res["max_formation_err"][b])
+        assert res["tracking_err"][b] == pytest.approx(np.mean(far))
+    assert np.isfinite(res["formed_time"]).all() if forms else np.isnan(res["formed_time"]).all()
+
+
+def test_tracking_scenarios_show_the_tracking_error_on_the_board() -> None:
+    from train.leaderboard import ENTRIES, SHOWN, SHOWN_TRACKING, markdown, summary_table
+
+    def row(success: float, track: float) -> dict:
+        m = dict.fromkeys({*SHOWN, *SHOWN_TRACKING}, 0.01)
+        m.update(success_rate=success, tracking_err=track, time_to_goal=0.1)
+        return {"kind": "analytic", "metrics": m}
+
+    rows = {e: row(1.0, 0.02 * (i + 1)) for i, e in enumerate(ENTRIES)}
+    board = {"scenarios": {"maneuver": rows, "hold": rows}, "episodes": 2, "seed": 0}
+    md = markdown(board, "formation-env leaderboard")
+    man, hold = md.split("## maneuver", 1)[1].split("## hold")
+    assert "| tracking_err |" in man and "time_to_goal" not in man.split("\n\n")[1]
+    assert "| time_to_goal |" in hold and "tracking_err" not in hold
+    assert "from the first sample whose error is at most a tenth" in md  # the definition of "formed"
+    table = summary_table(board)
+    assert "| maneuver | 1.00 / 0.020 m | 1.00 / 0.040 m |" in table and "| hold | 1.00 / 0.1 s |" in table

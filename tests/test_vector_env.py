@@ -8,7 +8,7 @@ from conftest import crowded_followers
 
 from formation_env.core.errors import FormationError
 from formation_env.env.commander import FormationCommanderEnv
-from formation_env.env.engine import Engine
+from formation_env.env.engine import INFO_KEYS, Engine
 from formation_env.env.formation import FormationEnv
 from formation_env.env.scenarios import REGISTRY
 from formation_env.env.vector import FormationVecEnv, GymnasiumFormationVecEnv
@@ -128,7 +128,8 @@ def test_gymnasium_adapter_same_step_autoreset():
     import gymnasium
 
     venv = FormationVecEnv("hold", num_envs=2, mode="commander", max_cycles=3)
-    genv = venv.to_gymnasium()
+    genv = venv.to_gymnasium(gymnasium.vector.AutoresetMode.SAME_STEP)
+    assert genv.metadata["autoreset_mode"] == gymnasium.vector.AutoresetMode.SAME_STEP
     assert isinstance(genv, gymnasium.vector.VectorEnv) and isinstance(genv, GymnasiumFormationVecEnv)
     obs, _ = genv.reset(seed=0)
     assert obs.shape == (2, *genv.single_observation_space.shape)
@@ -150,7 +151,7 @@ def test_gymnasium_final_info_matches_sync_vector_env_layout():
     import gymnasium
 
     venv = FormationVecEnv("narrow_passage", num_envs=6, mode="shared", seed=3)
-    genv = venv.to_gymnasium()
+    genv = venv.to_gymnasium("SameStep")
     genv.reset(seed=3)
     rng = np.random.default_rng(0)
     for _ in range(400):
@@ -163,10 +164,13 @@ def test_gymnasium_final_info_matches_sync_vector_env_layout():
     ref.num_envs = genv.num_envs
     want: dict = {}
     for s in np.flatnonzero(done):
-        b = s // venv.n_l
-        single = {key: venv.last_info[key][b].item() for key in info["final_info"] if not key.startswith("_")}
+        b, j = divmod(s, venv.n_l)
+        single = {key: venv.last_info[key][b].item() for key in info["final_info"] if not key.startswith("_")
+                  and key != "control_effort"}  # fmt: skip
+        single["control_effort"] = venv.last_info["control_effort"][b, j].item()  # the slot's leader's
         want = ref._add_info(want, {"final_obs": info["final_obs"][s], "final_info": single}, s)
-    assert set(want) == set(info) and set(want["final_info"]) == set(info["final_info"])
+    step_keys = {k for key in INFO_KEYS for k in (key, "_" + key)}  # every slot's step (or reset) info
+    assert set(want) | step_keys == set(info) and set(want["final_info"]) == set(info["final_info"])
     np.testing.assert_array_equal(want["_final_obs"], info["_final_obs"])
     for key, arr in want["final_info"].items():
         np.testing.assert_array_equal(arr, info["final_info"][key], err_msg=key)

@@ -42,7 +42,10 @@ from formation_env.env.scenarios import REGISTRY
 from .evaluate import _finite, make_engine, paired_difference
 from .evaluate import evaluate as evaluate_suite
 
-__all__ = ["ENTRIES", "LEARNED", "PROJECT_ROOT", "find_policies", "leaderboard", "main", "markdown", "write_project"]
+__all__ = [
+    "ENTRIES", "LEARNED", "PROJECT_ROOT", "SHOWN", "SHOWN_TRACKING", "find_policies", "leaderboard", "main", "markdown",
+    "shown", "write_project",
+]  # fmt: skip
 
 #: Learned entries: name -> (algo, mode).
 LEARNED: dict[str, tuple[str, str]] = {
@@ -55,9 +58,17 @@ LEARNED: dict[str, tuple[str, str]] = {
 ENTRIES: tuple[str, ...] = ("random", "analytic", *LEARNED)
 #: Metrics of every entry's tables (``evaluate``'s, with the time bound and the paired time against the planner).
 SHOWN = ("success_rate", "collision_rate", "time_to_goal", "time_vs_analytic", "time_lower_bound", "mean_formation_err")
+#: The columns of a tracking scenario (judged at its last sample, not timed: ``maneuver``, ``maneuver_3d``), whose
+#: agents start on the reference and succeed at once: how well they track, and the formation once formed.
+SHOWN_TRACKING = ("success_rate", "collision_rate", "tracking_err", "mean_formation_err", "max_formation_err")
 PRETRAINED = POLICY_DIR
 #: The source checkout whose ``docs/leaderboard.md`` and ``README.md`` table ``--project`` rewrites.
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+
+def shown(scenario: str) -> tuple[str, ...]:
+    """The metric columns of ``scenario``'s table: :data:`SHOWN`, or :data:`SHOWN_TRACKING` for a tracking task."""
+    return SHOWN if REGISTRY[scenario].terminate_on_success else SHOWN_TRACKING
 
 
 def find_policies(folder: str | Path, scenario: str, entry: str) -> list[Path]:
@@ -167,25 +178,31 @@ def markdown(board: dict[str, Any], command: str) -> str:
         "Columns: success and collision rates over the suite; time to goal (s) over solved episodes; "
         "`time_vs_analytic`: that time minus the planner's, paired by episode over the episodes both solved (s; "
         "negative: faster); the lower bound on the time (s, `agents/bounds.py`: the leaders' travel under the "
-        "input bound, obstacles ignored) over the solved episodes; mean formation error (m). `ppo_residual`: a "
+        "input bound, obstacles ignored) over the solved episodes; mean formation error (m). Tracking scenarios "
+        "(`maneuver`, `maneuver_3d`: the agents start on a moving reference and are judged at the last sample) show "
+        "instead `tracking_err`: the largest distance of an agent to its reference position, averaged over the "
+        "episode's samples (m), and `max_formation_err`: the largest formation error once the team has formed, "
+        "from the first sample whose error is at most a tenth of the scenario's success tolerance (5 mm for the "
+        "default 0.05 m), so that the followers' start noise is not counted (m). `ppo_residual`: a "
         "correction learned on top of the planner (action = planner + scale policy), not from scratch. Learned "
         "entries: mean over training seeds, (min to max across seeds) beside it; `-`: not trained or no episode "
         "solved.",
         "",
     ]
     for sc, rows in board["scenarios"].items():
-        lines += [f"## {sc}", "", "| entry | " + " | ".join(SHOWN) + " | seeds |", "|---" * (len(SHOWN) + 2) + "|"]
+        cols = shown(sc)
+        lines += [f"## {sc}", "", "| entry | " + " | ".join(cols) + " | seeds |", "|---" * (len(cols) + 2) + "|"]
         for entry, row in rows.items():
             n = len(row.get("per_seed", [])) if row["kind"] == "learned" else "-"
             n = n if row.get("metrics") is not None else "not trained"
-            lines.append(f"| {entry} | " + " | ".join(_cell(row, k) for k in SHOWN) + f" | {n} |")
+            lines.append(f"| {entry} | " + " | ".join(_cell(row, k) for k in cols) + f" | {n} |")
         lines.append("")
     return "\n".join(lines)
 
 
 def summary_table(board: dict[str, Any]) -> str:
     """The README's table: success rate and time to goal (s) of every entry on every scenario (tracking
-    scenarios, judged at their last sample, show success only)."""
+    scenarios, judged at their last sample, show the success rate and the mean tracking error, m)."""
     lines = ["| scenario | " + " | ".join(ENTRIES) + " | time bound (s) |", "|---" * (len(ENTRIES) + 2) + "|"]
     for sc, rows in board["scenarios"].items():
         timed = REGISTRY[sc].terminate_on_success  # tracking tasks are judged at the last sample, not timed
@@ -195,8 +212,12 @@ def summary_table(board: dict[str, Any]) -> str:
             if m is None:
                 cells.append("-")
                 continue
-            t = m["time_to_goal"] if timed else float("nan")
-            cells.append(f"{m['success_rate']:.2f}" + (f" / {t:.1f} s" if np.isfinite(t) else ""))
+            if timed:
+                t = m["time_to_goal"]
+                cells.append(f"{m['success_rate']:.2f}" + (f" / {t:.1f} s" if np.isfinite(t) else ""))
+            else:
+                e = m["tracking_err"]
+                cells.append(f"{m['success_rate']:.2f}" + (f" / {e:.3f} m" if np.isfinite(e) else ""))
         tb = f"{rows['analytic']['metrics']['time_lower_bound']:.1f}" if timed else "tracking"
         lines.append(f"| {sc} | " + " | ".join(cells) + f" | {tb} |")
     return "\n".join(lines)

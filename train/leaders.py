@@ -382,6 +382,7 @@ def train(
     curriculum: tuple[float, float] | None = None,
     algo_kwargs: dict[str, Any] | None = None,
     policy_kwargs: dict[str, Any] | None = None,
+    extra_callbacks: Sequence[BaseCallback] = (),
     config_file: str | None = None,
     env_version: int = 0,
     range_curriculum: dict[str, Any] | None = None,
@@ -400,11 +401,12 @@ def train(
         residual: > 0 learns a correction of scale ``residual`` on the analytic planner (commander).
         env_kwargs: engine arguments, e.g. ``{"reward_weights": {"distance": 0.2}}``.
         progress_bar: SB3's progress bar (None: only on a TTY and not in smoke runs).
-        eval_episodes: evaluation episodes after training (default 2 for smoke, 50 otherwise).
+        eval_episodes: evaluation episodes after training (default 2 for smoke, 50 otherwise; 0: none).
         curriculum: (factor, fraction): the success test's tolerances start ``factor`` times the scenario's and
             reach them after ``fraction`` of the timesteps (:class:`ToleranceCurriculum`).
         algo_kwargs: the algorithm's hyperparameters over :data:`ALGO_DEFAULTS` (e.g. ``n_steps``, ``gamma``).
         policy_kwargs: SB3 ``policy_kwargs`` over :data:`POLICY_DEFAULTS` (e.g. ``net_arch``, ``log_std_init``).
+        extra_callbacks: SB3 callbacks run beside the run's own (e.g. ``benchmarks.train_bench``'s timers).
         config_file: the recipe file these came from (recorded in the saved config).
         range_curriculum: ``{"start": {range name: [lo, hi]}, "fraction": f, "begin": b}``: those episode draws
             start at the given ranges, stay there until ``b`` of the timesteps (optional, default 0) and reach the
@@ -476,7 +478,7 @@ def train(
     )
     if progress_bar is None:
         progress_bar = sys.stdout.isatty() and not smoke
-    callbacks: list[BaseCallback] = [curve, ckpt]
+    callbacks: list[BaseCallback] = [curve, ckpt, *extra_callbacks]
     if curriculum is not None:
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:
@@ -522,6 +524,8 @@ def train(
     from train.evaluate import evaluate
 
     n_eval = eval_episodes if eval_episodes is not None else (2 if smoke else 50)
+    if n_eval == 0:
+        return config
     res = evaluate(
         str(stem) + ".zip",
         scenario,

@@ -40,9 +40,10 @@ def evaluation_section(out: Path, quick: bool = False, progress: bool | None = F
         "",
         f"Scenario `{suite['scenario']}`, {n} episodes with seeds {suite['seed']}..{suite['seed'] + n - 1} "
         "(paired: every policy meets the same episodes). Means over episodes with 95 % intervals (Wilson for "
-        "rates, Student t for means; `max_formation_err` and `min_clearance` are each episode's worst value, "
-        "averaged); the worst episode's values stand in the last column. Time to goal in s over successful "
-        "episodes.",
+        "rates, Student t for means; `max_formation_err` is each episode's largest formation error once the team "
+        "has formed, from the first sample whose error is at most a tenth of the success tolerance, averaged over "
+        "the episodes that formed; `min_clearance` each episode's smallest clearance, averaged); the worst "
+        "episode's values stand in the last column. Time to goal in s over successful episodes.",
         "",
         *markdown_table(results),
         "",
@@ -52,7 +53,7 @@ def evaluation_section(out: Path, quick: bool = False, progress: bool | None = F
         ratio = results[1]["metrics"]["time_to_goal"] / results[0]["metrics"]["time_to_goal"]
         lines += [
             f"Paired time to goal, {results[1]['policy']} minus analytic, over the {k} episodes both solved: "
-            f"{_fmt(m)} s [{_fmt(lo)}, {_fmt(hi)}]; ratio of means {_fmt(ratio)} (target <= 0.8).",
+            f"{_fmt(m)} s [{_fmt(lo)}, {_fmt(hi)}]; ratio of means {_fmt(ratio)}.",
             "",
         ]
     if len(results) == 1:

@@ -11,6 +11,7 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.vector import AutoresetMode
 from numpy.typing import NDArray
 
 from formation_env.core.errors import FormationError
@@ -22,7 +23,7 @@ from .maneuver import Pose, PoseCommand
 from .state import StepContext
 from .versions import with_version
 
-__all__ = ["ACTION_MODES", "FormationCommanderEnv", "versioned"]
+__all__ = ["ACTION_MODES", "FormationCommanderEnv", "vector", "versioned"]
 
 ACTION_MODES = ("leaders", "maneuver")
 
@@ -158,3 +159,49 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
 def versioned(version: int, **kwargs: Any) -> FormationCommanderEnv:
     """The commander env with env version ``version``'s defaults under ``kwargs`` (the ``-v1`` Gymnasium ids)."""
     return FormationCommanderEnv(**with_version(version, kwargs))
+
+
+def vector(
+    num_envs: int = 1,
+    *,
+    scenario: str = "narrow_passage",
+    version: int = 0,
+    action_mode: str = "leaders",
+    render_mode: str | None = None,
+    max_episode_steps: int | None = None,
+    autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+    pose_speed: float | None = None,
+    scale_rate: float | None = None,
+    rotation_rate: float | None = None,
+    shear_rate: float | None = None,
+    scale_range: tuple[float, float] | None = None,
+    **kwargs: Any,
+) -> Any:
+    """``num_envs`` commander envs in one batch: the ``vector_entry_point`` of every ``formation_env`` Gymnasium id.
+
+    ``gym.make_vec(id, num_envs=N, **kwargs)`` calls it with the id's ``scenario`` (and ``version``), its
+    ``max_episode_steps`` and the caller's keyword arguments (those of :class:`FormationCommanderEnv`), and gets a
+    :class:`~formation_env.env.batch.GymnasiumFormationVecEnv` whose env b replays ``gym.make(id, **kwargs)``
+    reset with ``seed + b`` (time limit included), stepped as one batch. ``autoreset_mode``: a
+    ``gymnasium.vector.AutoresetMode`` (default ``NEXT_STEP``, as Gymnasium's ``SyncVectorEnv``).
+    ``render_mode``: None or ``"rgb_array"``.
+    """
+    from .batch import FormationBatch, GymnasiumFormationVecEnv
+
+    if action_mode not in ACTION_MODES:
+        raise FormationError(f"action_mode must be one of {list(ACTION_MODES)}, got {action_mode!r}")
+    given: dict[str, Any] = {"pose_speed": pose_speed, "scale_rate": scale_rate, "rotation_rate": rotation_rate,
+                             "shear_rate": shear_rate, "scale_range": scale_range}  # fmt: skip
+    pose_kwargs = {key: val for key, val in given.items() if val is not None}
+    if pose_kwargs and action_mode != "maneuver":
+        raise TypeError(f"{', '.join(pose_kwargs)} apply to action_mode='maneuver' only, not to {action_mode!r}")
+    batch = FormationBatch(
+        num_envs=num_envs,
+        mode="commander",
+        render_mode=render_mode,
+        action_mode=action_mode,
+        maneuver_kwargs=pose_kwargs or None,
+        max_episode_steps=max_episode_steps,
+        **with_version(version, {"scenario": scenario, **kwargs}),
+    )
+    return GymnasiumFormationVecEnv(batch, autoreset_mode)

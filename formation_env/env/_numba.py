@@ -27,7 +27,7 @@ __all__ = ["jit", "source_files", "source_stamp"]
 #: The attribute of a Python function that carries its stamp to the cache locator.
 _STAMP = "__formation_env_stamp__"
 #: numba's cache implementation, whose locator classes find where (and with which stamp) a function is cached.
-_IMPL: Any = getattr(caching, "CacheImpl", None) or caching._CacheImpl
+_IMPL: Any = vars(caching).get("CacheImpl") or vars(caching)["_CacheImpl"]
 
 
 def _file_hash(path: str) -> str:

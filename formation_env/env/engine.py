@@ -491,7 +491,7 @@ class Engine:
         args = self._args(c, state, a, x1, mem1, self._noise(B, rng))
         threaded = B >= PARALLEL_FROM and numba.get_num_threads() > 1
         raw, obs, rew = (mod.step_parallel if threaded else mod.step)(*args)
-        out = Outputs._make(raw)
+        out: Any = Outputs._make(raw)  # fields from kernel.ARRAYS
         f = out.flags
         mem = out.mem if state.memory is not None else None
         new = EngineState(out.x, out.pos, out.vel, mem, out.k, out.goal, out.gvel, out.gdist, out.err, out.streak,

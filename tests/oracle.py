@@ -64,12 +64,18 @@ def phase_distance(eng: Engine, state: EngineState):
 
 def path_distance(p0, p1, caps0: Capsules, caps1: Capsules, samples: int = 1001):
     """Smallest distance between each agent's motion and each capsule over a step, by dense sampling of the
-    relative motion (B, n, m): an independent check of the closed-form segment-segment distance."""
+    relative motion (B, n, m): an independent check of the closed-form segment-segment distance. The capsule
+    translates from its start at the step's beginning to its start at the end; a capsule that turned or changed
+    radius is measured with both its axes and radii (the engine's convention), the smaller distance counts."""
     best = np.full((p0.shape[0], p0.shape[1], caps0.a.shape[1]), np.inf)
+    frames = [(caps0.e, caps0.rad)]
+    if not (np.array_equal(caps0.e, caps1.e) and np.array_equal(caps0.rad, caps1.rad)):
+        frames.append((caps1.e, caps1.rad))
     for s in np.linspace(0.0, 1.0, samples):
         q = p0 + s * (p1 - p0)
-        c = Capsules(caps0.a + s * (caps1.a - caps0.a), caps0.e, caps0.rad)
-        best = np.minimum(best, capsule_distance(q, c))
+        for e, rad in frames:
+            c = Capsules(caps0.a + s * (caps1.a - caps0.a), e, rad)
+            best = np.minimum(best, capsule_distance(q, c))
     return best
 
 
@@ -122,7 +128,10 @@ def oracle_step(eng: Engine, state: EngineState, actions):
     if caps.a.shape[1]:
         clear = np.minimum(clear, capsule_distance(pos, caps).min(axis=(1, 2)) - eng.agent_radius)
         caps0 = eng.capsules(state.params, state.k)
-        moved = np.abs(pos - state.pos).max(axis=(1, 2)) + np.abs(caps.a - caps0.a).max(axis=(1, 2), initial=0.0)
+        shift = np.abs(caps.a - caps0.a).max(axis=(1, 2), initial=0.0)
+        turned = np.any(caps.e != caps0.e, axis=(1, 2)) | np.any(caps.rad != caps0.rad, axis=1)
+        ends = np.abs(caps.a + caps.e - caps0.a - caps0.e).max(axis=(1, 2), initial=0.0)
+        moved = np.abs(pos - state.pos).max(axis=(1, 2)) + np.where(turned, np.maximum(shift, ends), shift)
         for bb in np.flatnonzero(moved > 2 * eng.agent_radius / np.sqrt(d)):
             c0, c1 = (Capsules(*(f[bb : bb + 1] for f in c)) for c in (caps0, caps))
             sw = path_distance(state.pos[bb : bb + 1], pos[bb : bb + 1], c0, c1).min()

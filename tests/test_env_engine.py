@@ -289,7 +289,7 @@ def test_an_agent_and_a_disc_that_pass_through_each_other_in_one_step_collide():
     contacts = []
     for vx in (-1.15, 1.15):  # toward the agent (they cross), and away from it (they never meet)
         disc = np.array([[[0.115, 0.0, vx, 0.0, 0.01]]])
-        params = {**s.params, "moving_circles": disc, "_mov_p": disc}
+        params = {**s.params, "moving_circles": disc}
         one = s._replace(x=x, pos=x.copy(), params=params)
         a = np.zeros((1, eng.n_l, eng.p))
         a[0, :, 0] = 1.0  # the team translates 0.115 m toward +x

@@ -14,6 +14,7 @@ episode end; then the rewards and the observations.
 from __future__ import annotations
 
 import math
+import operator
 import warnings
 from collections.abc import Sequence
 from typing import Any
@@ -37,6 +38,7 @@ from .kernel import (
     FLAG_SUCCESS,
     FLAG_TERMINATED,
     FLAG_TRUNCATED,
+    STATE_INPUTS,
     Consts,
     Episode,
     Outputs,
@@ -74,6 +76,9 @@ _NO_STATE = np.zeros((0, 0, 0))
 _NO_NOISE = np.zeros((0, 0, 0))
 #: The fields of ``EngineState`` but ``params`` (the last).
 _FIELDS = EngineState._fields[:-1]
+#: The state's fields the compiled step takes, in its argument order (``kernel.STATE_INPUTS``).
+_STATE_ARGS = operator.attrgetter(*(spec.state for spec in STATE_INPUTS))
+_MEMORY_AT = [spec.state for spec in STATE_INPUTS].index("memory")
 #: The info entries of a step (arrays (B,) from :meth:`Engine.step`), with their units.
 INFO_KEYS: dict[str, str] = {
     "success": "bool",
@@ -248,6 +253,7 @@ class Engine:
         self._build_state_bounds()
         self._compiled: tuple[Array, Any, Any] | None = None
         self._consts: Consts | None = None
+        self._compose()  # every component's parameters are checked now, not at the first step
 
     # ------------------------------------------------------------------ construction
     def _weights(self, overrides: dict[str, float] | None) -> dict[str, float]:
@@ -311,8 +317,8 @@ class Engine:
         params["_ca"], params["_ce"], params["_cr"] = (np.ascontiguousarray(f) for f in caps)
         params["_pvec"] = np.ascontiguousarray(self.scenario.param_vector(params), dtype=np.float64)
         params["_goal_p"] = np.ascontiguousarray(self.scenario.goal_vector(params), dtype=np.float64)
-        moving = self._moving[0].key if self._moving else None
-        params["_mov_p"] = np.ascontiguousarray(params[moving]) if moving else np.zeros((B, 0, 2 * self.d + 1))
+        for ob in self._moving:
+            params[ob.key] = np.ascontiguousarray(params[ob.key], dtype=np.float64)
         for arr in params.values():
             arr.setflags(write=False)
         k = np.zeros(B, dtype=np.int64)
@@ -364,24 +370,28 @@ class Engine:
         return {**self.__dict__, "_compiled": None, "_consts": None}
 
     # ------------------------------------------------------------------ the compiled step
+    def _compose(self) -> tuple[Array, Any, Any]:
+        """The reward weights of the composed terms, the compiled step's module and the state blocks' (or None):
+        :func:`~formation_env.env.kernel.compose` of this engine's components."""
+        if self._compiled is None:
+            sc = self.scenario
+
+            def blocks(obs: Observer) -> list[tuple[str, Any, int]]:
+                return [(blk.name, blk.row if blk.name != "task" else sc.task_row, obs.slices[blk.name].start)
+                        for blk in obs.blocks]  # fmt: skip
+
+            terms = [name for name, w in self.reward_weights.items() if w != 0.0]
+            moving = [ob.row for ob in self._moving]
+            mod = compose(blocks(self.observer), [(t, TERMS[t].row) for t in terms], sc.route_row, moving, sc.pose_row)
+            so = self.state_observer
+            smod = compose(blocks(so), [], sc.route_row, moving, sc.pose_row) if so is not None else None
+            self._compiled = (np.array([self.reward_weights[t] for t in terms]), mod, smod)
+        return self._compiled
+
     def _kernel(self) -> tuple[Consts, Any]:
         """The constants of the compiled step and its module (composed once per engine; the constants again
         when ``max_cycles`` changed)."""
-        if self._compiled is None:
-            from .rewards import ROUTE_TERMS
-
-            blocks = [(blk.row if blk.name != "task" else self.scenario.task_row, self.obs_blocks[blk.name].start)
-                      for blk in self.observer.blocks]  # fmt: skip
-            terms = [name for name, w in self.reward_weights.items() if w != 0.0]
-            route = self.scenario.route_row if any(t in ROUTE_TERMS for t in terms) else None
-            moving = self._moving[0].row if self._moving else None
-            mod = compose(blocks, [TERMS[t].row for t in terms], route, moving, self.scenario.pose_row)
-            state_blocks = [] if self.state_observer is None else self.state_observer.blocks
-            smod = compose([(blk.row if blk.name != "task" else self.scenario.task_row,
-                             self.state_observer.slices[blk.name].start) for blk in state_blocks], [], None, moving,
-                           self.scenario.pose_row) if self.state_observer is not None else None  # fmt: skip
-            self._compiled = (np.array([self.reward_weights[t] for t in terms]), mod, smod)
-        weights, mod, _ = self._compiled
+        weights, mod, _ = self._compiled or self._compose()
         if self._consts is None or self._consts.max_cycles != self.max_cycles:
             d = self.d
             self._consts = Consts(
@@ -409,10 +419,12 @@ class Engine:
 
     def _args(self, c: Consts, state: EngineState, a: Array, x1: Array, mem1: Array, noise: Array) -> tuple[Any, ...]:
         p = state.params
-        ep = Episode(p["_pvec"], p["_ca"], p["_ce"], p["_cr"], p["_mov_p"], p["_goal_p"])
-        mem = state.memory if state.memory is not None else np.zeros((state.x.shape[0], 0, 0))
-        return (c, ep, state.x, mem, state.pos, state.vel, state.goal, state.goal_vel, state.k, state.goal_dist,
-                state.streak, a, x1, mem1, noise)  # fmt: skip
+        mov = tuple([p[ob.key] for ob in self._moving]) if self._moving else ()
+        ep = Episode(p["_pvec"], p["_ca"], p["_ce"], p["_cr"], mov, p["_goal_p"])
+        given = _STATE_ARGS(state)
+        if state.memory is None:
+            given = (*given[:_MEMORY_AT], np.zeros((state.x.shape[0], 0, 0)), *given[_MEMORY_AT + 1 :])
+        return (c, ep, *given, a, x1, mem1, noise)
 
     # ------------------------------------------------------------------ the API
     def observe(
@@ -479,7 +491,7 @@ class Engine:
         args = self._args(c, state, a, x1, mem1, self._noise(B, rng))
         threaded = B >= PARALLEL_FROM and numba.get_num_threads() > 1
         raw, obs, rew = (mod.step_parallel if threaded else mod.step)(*args)
-        out = Outputs._make(raw)
+        out: Any = Outputs._make(raw)  # fields from kernel.ARRAYS
         f = out.flags
         mem = out.mem if state.memory is not None else None
         new = EngineState(out.x, out.pos, out.vel, mem, out.k, out.goal, out.gvel, out.gdist, out.err, out.streak,
@@ -509,8 +521,8 @@ class Engine:
             acts = np.zeros((B, self.n_l, self.p))
             so = self.state_observer
             c = c._replace(obs_low=so.low, obs_high=so.high, noise_mask=so.noise_mask)
-            assert self._compiled is not None
-            blocks, theta = self._compiled[2].observe(*self._args(c, state, acts, _NO_STATE, _NO_STATE, _NO_NOISE))
+            smod = (self._compiled or self._compose())[2]
+            blocks, theta = smod.observe(*self._args(c, state, acts, _NO_STATE, _NO_STATE, _NO_NOISE))
         else:
             theta = self._fit(state.pos)[0] if ctx is None else ctx.theta
         t = self.dt * state.k.astype(np.float64)

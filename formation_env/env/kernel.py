@@ -1,21 +1,27 @@
 """The compiled step: one numba implementation of a step, composed per engine from its components.
 
-A step runs environment by environment (row b): :func:`move_row` (law and dynamics), the capsules, then
-:func:`contacts_row`, the goal and :func:`judge_row` (goal distances, affine fit, success, the episode's end);
-then the engine's reward terms fill the rewards and its observation blocks the observations. Every part and
-every component is a numba function of the row ``b`` and of the arrays it reads, its parameters named after
-the fields of :class:`StepArrays`, :class:`Consts` and :class:`Episode` (:func:`call`):
+A step runs environment by environment (row b) through its *parts* (:data:`PARTS`, in order): ``law`` (the
+followers' law and the dynamics), ``capsules`` (every obstacle at the step's time), ``contacts``, ``goal``,
+``judge`` (goal distances, affine fit, success, the episode's end) and, when a component reads it, ``route``;
+then the engine's reward terms fill the rewards and its observation blocks the observations. Each part declares
+the arrays it writes; every array of the step is declared once, in :data:`ARRAYS` (name, shape, unit, the part
+that writes it, what it means), with the engine's constants (:class:`Consts`) and the episodes' arrays
+(:class:`Episode`). A component is a numba function of the row ``b`` and of the arrays it reads, each parameter
+named after one of them (:func:`call`):
 
 * an observation block ``row(b, out, lo, ...)`` writes every leader's entries into ``out[i, lo:lo + size]``;
 * a reward term ``row(b, out, w, ...)`` adds w times every leader's value to ``out`` (n_l,);
 * a scenario's ``route_row(pvec, radius, pos, goal, out)`` writes each agent's route length (m) to its goal
   (the ``approach`` potential) given the episode's parameters ``pvec`` (k,) and the agent radius (m), pos,
   goal (n, d) -> out (n,); its ``pose_row(goal_p, t, out)`` the pose of a moving goal; a moving obstacle
-  type's ``row`` its capsules at time t.
+  type's ``row(p, t, bounds, a, e, rad)`` its capsules at time t.
 
-:func:`compose` writes the source that calls an engine's parts and components in order and compiles it once
-per distinct composition (cached on disk). The constants (:class:`Consts`) and the episode's arrays
-(:class:`Episode`) are made once and reused; the step's outputs are allocated inside the compiled code.
+:func:`compose` reads every component's parameters when the engine is built: it refuses a name that is no array
+of the step (naming the component, the name and the arrays that exist), schedules the parts the components
+read (the ``route`` when a term or block reads ``route0`` or ``route1``; in ``observe``, the reset's
+observation without a step, the parts its blocks read, or it refuses a block that reads what ``observe`` cannot
+have), checks that each array has one writer per composed function, and writes the source of the step, which it
+compiles once per distinct composition (cached on disk). :func:`array_table` is the table of docs/architecture.md.
 """
 
 from __future__ import annotations
@@ -28,16 +34,31 @@ import os
 import re
 import sys
 import tempfile
-from collections.abc import Sequence
+from collections import namedtuple
+from collections.abc import Callable, Sequence
 from typing import Any, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
 
-from ._numba import jit
+from ._numba import jit, source_stamp
 from .obstacles import path_clearance, point_clearance
 
-__all__ = ["Consts", "Episode", "Outputs", "StepArrays", "call", "compose", "fit_rows", "jit", "straight_route"]
+__all__ = [
+    "ARRAYS",
+    "PARTS",
+    "ArraySpec",
+    "Consts",
+    "Episode",
+    "Outputs",
+    "Part",
+    "array_table",
+    "call",
+    "compose",
+    "fit_rows",
+    "jit",
+    "straight_route",
+]
 
 Array = NDArray[np.float64]
 Ints = NDArray[np.int64]
@@ -45,16 +66,7 @@ Bools = NDArray[np.bool_]
 
 
 class Consts(NamedTuple):
-    """An engine's constants: ``leaders`` (n_l,) agent indices; ``others`` (n_l, n_l - 1) the other leaders of
-    each (leader indices); ``pair_i``, ``pair_j`` (P,) agent pairs checked for contact; ``r`` (n, d) nominal
-    configuration; ``pinv`` (d + 1, n) pseudo-inverse of [r, 1] (the affine fit); ``law`` the law's one-step map
-    M ([x', mem'] = [x, u_l, mem] M; (0, 0) when the engine stepped the law itself: sparse stresses); ``c_t``
-    (q, d) = C^T; ``ca_t`` (q, d) = (C A)^T, or (0, d): velocity from the change of position; ``bounds`` (2, d)
-    world box (m); ``ray_dirs`` (R, 2); ``obs_low``, ``obs_high``, ``noise_mask`` (D,) observation bounds and
-    which entries take noise; ``weights`` (T,) reward weights of the composed terms; scalars ``dt`` (s),
-    ``u_max``, ``radius`` (m), ``fast`` (m: a move beyond it sweeps contacts), ``goal_tol``, ``formation_tol``
-    (m), ``v_bound`` (m/s), ``obstacle_range``, ``sense_radius`` (m), ``max_cycles``, ``hold_steps``,
-    ``n_nearest``, ``k_nearest``, ``end_on_success``."""
+    """An engine's constants (their shapes, units and meanings: :data:`ARRAYS`, written by ``engine``)."""
 
     leaders: Ints
     others: Ints
@@ -88,81 +100,181 @@ class Consts(NamedTuple):
 
 
 class Episode(NamedTuple):
-    """The episodes' arrays from the reset: ``pvec`` (B, k) the scenario's parameters; static capsules
-    ``cap_a``, ``cap_e`` (B, m, d) and ``cap_r`` (B, m); ``mov_p`` (B, M, w) the moving obstacles' parameters
-    (their type's layout); ``goal_p`` (B, w') what the scenario's ``pose_row`` reads of a moving goal."""
+    """The episodes' arrays from the reset (:data:`ARRAYS`, written by ``reset``); ``mov_p`` holds one array per
+    moving obstacle type of the scenario, in its ``obstacle_types`` order."""
 
     pvec: Array
     cap_a: Array
     cap_e: Array
     cap_r: Array
-    mov_p: Array
+    mov_p: tuple[Array, ...]
     goal_p: Array
 
 
-class StepArrays(NamedTuple):
-    """What the components read and write in one step (made inside the compiled code): the constants ``c``,
-    the episodes ``ep``; before the step ``x0`` (B, n, q), ``mem0`` (B, n_f, p), ``pos0``, ``vel0``, ``goal0``,
-    ``gvel0`` (B, n, d), ``k0`` (B,), ``gdist0`` (B, n_l); the clipped actions ``act`` (B, n_l, p); after it
-    ``x``, ``mem``, ``pos``, ``vel``, ``goal``, ``gvel``, ``k``, ``gdist``, ``streak``, ``err`` (B,) the
-    formation error (m), ``theta`` (B, d, d), ``bfit`` (B, d) the affine fit, ``clear`` (B,) the smallest gap
-    between surfaces (m), ``gmax`` (B,) the largest goal distance (m), ``flags`` (B, 6) bool: collision,
-    out of bounds, at goal, success, terminated, truncated (the ``FLAG_*`` columns); ``effort`` (B, n_l)
-    = |u_i|^2; ``cur_a``, ``cur_e`` (B, m, d), ``cur_r`` (B, m) every capsule now and ``old_a`` (B, m, d)
-    their axes' starts a sample before; ``route0``, ``route1`` (B, n) route lengths before and after (when a
-    term reads them)."""
-
-    c: Consts
-    ep: Episode
-    x0: Array
-    mem0: Array
-    pos0: Array
-    vel0: Array
-    goal0: Array
-    gvel0: Array
-    k0: Ints
-    gdist0: Array
-    streak0: Ints
-    act: Array
-    x: Array
-    mem: Array
-    pos: Array
-    vel: Array
-    goal: Array
-    gvel: Array
-    k: Ints
-    gdist: Array
-    streak: Ints
-    err: Array
-    theta: Array
-    bfit: Array
-    clear: Array
-    gmax: Array
-    flags: Bools
-    effort: Array
-    cur_a: Array
-    cur_e: Array
-    cur_r: Array
-    old_a: Array
-    route0: Array
-    route1: Array
-
-
 FLAG_COLLISION, FLAG_OOB, FLAG_AT_GOAL, FLAG_SUCCESS, FLAG_TERMINATED, FLAG_TRUNCATED = range(6)
+#: The columns of ``flags``, by name (a part's write ``flags:name``).
+FLAG_NAMES = ("collision", "oob", "at_goal", "success", "terminated", "truncated")
+
+
+# ---------------------------------------------------------------------------- the declaration
+class ArraySpec(NamedTuple):
+    """One array of the step.
+
+    Attributes:
+        name: the name a component's parameter gives to read it.
+        shape: its shape, in the symbols of the step (B, n, n_l, n_f, d, q, p, m, M_j, ...).
+        unit: its unit ("1": none).
+        writer: the part that writes it (:data:`PARTS`), or ``state`` (the state before the step), ``engine``
+            (a constant, :class:`Consts`), ``reset`` (an episode's, :class:`Episode`).
+        meaning: one line.
+        alloc: how the step allocates it (a numpy expression in the shape symbols), for the parts' arrays.
+        observe: what ``observe`` (an observation without a step) gives: ``state`` (the state's own array),
+            ``part`` (its part runs when a block reads it), ``zeros``, or ``""`` (nothing: a block that reads it
+            is refused).
+        out: the step returns it (:class:`Outputs`).
+        state: for a ``state`` array, the ``EngineState`` field it comes from.
+    """
+
+    name: str
+    shape: str
+    unit: str
+    writer: str
+    meaning: str
+    alloc: str = ""
+    observe: str = "part"
+    out: bool = False
+    state: str = ""
+
+
+# fmt: off
+_E = "np.empty"
+#: Every array of the step, in the order of the step's arguments (the ``state`` ones) and outputs (``out``).
+ARRAYS: tuple[ArraySpec, ...] = (
+    # the state before the step (the step's inputs; in observe, the state itself)
+    ArraySpec("x0", "(B, n, q)", "state", "state", "agent states x", observe="state", state="x"),
+    ArraySpec("mem0", "(B, n_f, p)", "input", "state", "follower-law memory (previous inputs; (B, 0, 0): none)",
+              observe="state", state="memory"),
+    ArraySpec("pos0", "(B, n, d)", "m", "state", "positions C x", observe="state", state="pos"),
+    ArraySpec("vel0", "(B, n, d)", "m/s", "state", "velocities", observe="state", state="vel"),
+    ArraySpec("goal0", "(B, n, d)", "m", "state", "goal positions", observe="state", state="goal"),
+    ArraySpec("gvel0", "(B, n, d)", "m/s", "state", "goal velocities", observe="state", state="goal_vel"),
+    ArraySpec("k0", "(B,)", "samples", "state", "samples taken", observe="state", state="k"),
+    ArraySpec("gdist0", "(B, n_l)", "m", "state", "each leader's distance to its goal", observe="state",
+              state="goal_dist"),
+    ArraySpec("streak0", "(B,)", "samples", "state", "consecutive samples at the goal", observe="state",
+              state="streak"),
+    # law and dynamics
+    ArraySpec("act", "(B, n_l, p)", "1", "law", "the leaders' actions, clipped to [-1, 1]", observe="zeros"),
+    ArraySpec("effort", "(B, n_l)", "input^2", "law", "u_i . u_i, the squared input of each leader (u = u_max a)",
+              "np.zeros((B, n_l))", observe="", out=True),
+    ArraySpec("x", "(B, n, q)", "state", "law", "agent states after the step",
+              "np.empty(x0.shape) if law.shape[0] else x_in", observe="state", out=True),
+    ArraySpec("mem", "(B, n_f, p)", "input", "law", "follower-law memory after the step",
+              "np.empty(mem0.shape) if law.shape[0] else mem_in", observe="state", out=True),
+    ArraySpec("pos", "(B, n, d)", "m", "law", "positions after the step", f"{_E}(pos0.shape)", "state", True),
+    ArraySpec("vel", "(B, n, d)", "m/s", "law", "velocities (C A x, or the change of position over T)",
+              f"{_E}(pos0.shape)", "state", True),
+    ArraySpec("k", "(B,)", "samples", "law", "samples taken after the step", f"{_E}(B, np.int64)", "state", True),
+    # obstacles
+    ArraySpec("cur_a", "(B, m, d)", "m", "capsules", "every capsule's axis start at t = k T (static, then each "
+              "moving type's)", f"{_E}((B, m, d))"),
+    ArraySpec("cur_e", "(B, m, d)", "m", "capsules", "every capsule's axis (start to end) at t", f"{_E}((B, m, d))"),
+    ArraySpec("cur_r", "(B, m)", "m", "capsules", "every capsule's radius at t", f"{_E}((B, m))"),
+    ArraySpec("old_a", "(B, m, d)", "m", "capsules", "axis starts a sample before, t - T (observe: at t)",
+              f"{_E}((B, m, d))"),
+    ArraySpec("old_e", "(B, m, d)", "m", "capsules", "axes at t - T (observe: at t)", f"{_E}((B, m, d))"),
+    ArraySpec("old_r", "(B, m)", "m", "capsules", "radii at t - T (observe: at t)", f"{_E}((B, m))"),
+    # contacts (and the judgement's columns of flags)
+    ArraySpec("clear", "(B,)", "m", "contacts", "smallest gap between surfaces (agents, capsules; along the "
+              "step when something moved fast; observe: at the sample)", "np.full(B, np.inf)", out=True),
+    ArraySpec("flags", "(B, 6)", "bool", "contacts, judge", "collision, oob (contacts); at_goal, success, "
+              "terminated, truncated (judge): the FLAG_* columns", "np.zeros((B, 6), np.bool_)", out=True),
+    # goal
+    ArraySpec("goal", "(B, n, d)", "m", "goal", "goal positions at t (the scenario's pose_row, if it moves)",
+              f"{_E}(pos0.shape)", "state", True),
+    ArraySpec("gvel", "(B, n, d)", "m/s", "goal", "goal velocities (x*(t + T) - x*(t)) / T",
+              f"{_E}(pos0.shape)", "state", True),
+    # judgement
+    ArraySpec("gdist", "(B, n_l)", "m", "judge", "each leader's distance to its goal", f"{_E}(gdist0.shape)",
+              "state", True),
+    ArraySpec("streak", "(B,)", "samples", "judge", "consecutive samples at the goal", f"{_E}(B, np.int64)",
+              "state", True),
+    ArraySpec("err", "(B,)", "m", "judge, fit", "formation error: RMS residual of the affine fit", f"{_E}(B)",
+              out=True),
+    ArraySpec("gmax", "(B,)", "m", "judge", "largest goal distance of any agent", f"{_E}(B)", out=True),
+    ArraySpec("theta", "(B, d, d)", "1", "judge, fit", "Theta of the affine fit of all agents",
+              f"{_E}((B, d, d))", out=True),
+    ArraySpec("bfit", "(B, d)", "m", "judge, fit", "b of the affine fit", f"{_E}((B, d))"),
+    # route (when a component reads it)
+    ArraySpec("route0", "(B, n)", "m", "route", "each agent's route length to its goal before the step (the "
+              "scenario's route_row)", f"{_E}((B, n))"),
+    ArraySpec("route1", "(B, n)", "m", "route", "route lengths after the step", f"{_E}((B, n))"),
+    # the engine's constants
+    ArraySpec("leaders", "(n_l,)", "index", "engine", "the leaders' agent indices"),
+    ArraySpec("others", "(n_l, n_l - 1)", "index", "engine", "the other leaders of each (leader indices)"),
+    ArraySpec("pair_i", "(P,)", "index", "engine", "first agents of the pairs checked for contact"),
+    ArraySpec("pair_j", "(P,)", "index", "engine", "second agents of the pairs"),
+    ArraySpec("r", "(n, d)", "m", "engine", "nominal configuration"),
+    ArraySpec("pinv", "(d + 1, n)", "1/m, 1", "engine", "pseudo-inverse of [r, 1] (the affine fit)"),
+    ArraySpec("law", "(nq + n_l p + n_f p, nq + n_f p)", "1", "engine", "the law's one-step map M ([x', mem'] = "
+              "[x, u_l, mem] M; (0, 0): the engine stepped the law, a sparse stress)"),
+    ArraySpec("c_t", "(q, d)", "1", "engine", "C^T (positions C x)"),
+    ArraySpec("ca_t", "(q, d) or (0, d)", "1/s", "engine", "(C A)^T (velocities C A x), or none"),
+    ArraySpec("bounds", "(2, d)", "m", "engine", "world box (low, high)"),
+    ArraySpec("ray_dirs", "(R, 2)", "1", "engine", "unit directions of the range-sensor rays"),
+    ArraySpec("obs_low", "(D,)", "entry's", "engine", "observation bounds, low"),
+    ArraySpec("obs_high", "(D,)", "entry's", "engine", "observation bounds, high"),
+    ArraySpec("noise_mask", "(D,)", "1", "engine", "1 where observation noise applies"),
+    ArraySpec("weights", "(T,)", "1", "engine", "weights of the composed reward terms"),
+    ArraySpec("dt", "scalar", "s", "engine", "sampling period T"),
+    ArraySpec("u_max", "scalar", "input", "engine", "input of action 1"),
+    ArraySpec("radius", "scalar", "m", "engine", "agent radius"),
+    ArraySpec("fast", "scalar", "m", "engine", "a move beyond it sweeps contacts: 2 radius / sqrt(d)"),
+    ArraySpec("goal_tol", "scalar", "m", "engine", "every agent within it of its goal: at the goal"),
+    ArraySpec("formation_tol", "scalar", "m", "engine", "formation error below it: at the goal"),
+    ArraySpec("v_bound", "scalar", "m/s", "engine", "velocity bound of observations"),
+    ArraySpec("obstacle_range", "scalar", "m", "engine", "obstacle sensing range"),
+    ArraySpec("sense_radius", "scalar", "m", "engine", "how far a leader sees other agents"),
+    ArraySpec("max_cycles", "scalar", "samples", "engine", "samples before truncation"),
+    ArraySpec("hold_steps", "scalar", "samples", "engine", "samples at the goal that make a success"),
+    ArraySpec("n_nearest", "scalar", "1", "engine", "nearest obstacles sensed in 3D"),
+    ArraySpec("k_nearest", "scalar", "1", "engine", "agents in the nearest_agents block"),
+    ArraySpec("end_on_success", "scalar", "bool", "engine", "success ends the episode"),
+    # the episodes' arrays
+    ArraySpec("pvec", "(B, k)", "scenario's", "reset", "the scenario's episode parameters (its param_vector)"),
+    ArraySpec("cap_a", "(B, m_s, d)", "m", "reset", "static capsules' axis starts (made at the reset)"),
+    ArraySpec("cap_e", "(B, m_s, d)", "m", "reset", "static capsules' axes"),
+    ArraySpec("cap_r", "(B, m_s)", "m", "reset", "static capsules' radii"),
+    ArraySpec("mov_p", "tuple of (B, M_j, w_j)", "type's", "reset", "each moving type's parameters (its row's p)"),
+    ArraySpec("goal_p", "(B, w)", "scenario's", "reset", "what the scenario's pose_row reads of a moving goal"),
+)
+# fmt: on
+SPECS: dict[str, ArraySpec] = {a.name: a for a in ARRAYS}
+if set(Consts._fields) != {a.name for a in ARRAYS if a.writer == "engine"} or set(Episode._fields) != {
+    a.name for a in ARRAYS if a.writer == "reset"
+}:  # pragma: no cover  (a declaration out of step with the records)
+    raise RuntimeError("kernel.ARRAYS must declare every field of Consts (engine) and Episode (reset)")
+
+#: What the step returns of its arrays, in :data:`ARRAYS` order (the compiled step returns a plain tuple, since
+#: numba boxes a named one much more slowly).
+Outputs = namedtuple("Outputs", [a.name for a in ARRAYS if a.out])  # type: ignore[misc]
+#: The state arrays, the step's inputs after ``c`` and ``ep``.
+STATE_INPUTS: tuple[ArraySpec, ...] = tuple(a for a in ARRAYS if a.writer == "state")
 
 
 # ---------------------------------------------------------------------------- the parts of a row
 @jit
 def static_capsules(  # pragma: no cover
-    b: int, cap_a: Array, cap_e: Array, cap_r: Array, cur_a: Array, cur_e: Array, cur_r: Array, old_a: Array
-) -> None:
-    """The static capsules of env b into ``cur_a``, ``cur_e``, ``cur_r`` and ``old_a`` (the moving ones follow,
-    from their type's row)."""
+    b: int, cap_a: Array, cap_e: Array, cap_r: Array, cur_a: Array, cur_e: Array, cur_r: Array, old_a: Array,
+    old_e: Array, old_r: Array
+) -> None:  # fmt: skip
+    """The static capsules of env b into ``cur_*`` and ``old_*`` (the moving ones follow, from their types'
+    rows)."""
     for j in range(cap_r.shape[1]):
         for c in range(cap_a.shape[2]):
             cur_a[b, j, c] = old_a[b, j, c] = cap_a[b, j, c]
-            cur_e[b, j, c] = cap_e[b, j, c]
-        cur_r[b, j] = cap_r[b, j]
+            cur_e[b, j, c] = old_e[b, j, c] = cap_e[b, j, c]
+        cur_r[b, j] = old_r[b, j] = cap_r[b, j]
 
 
 @jit
@@ -251,10 +363,15 @@ def move_row(  # pragma: no cover
 @jit
 def contacts_row(  # pragma: no cover
     b: int, pos0: Array, pos: Array, pair_i: Ints, pair_j: Ints, radius: float, cur_a: Array, cur_e: Array,
-    cur_r: Array, old_a: Array, fast: float, bounds: Array, clear: Array, flags: Bools
+    cur_r: Array, old_a: Array, old_e: Array, old_r: Array, fast: float, bounds: Array, clear: Array, flags: Bools
 ) -> None:  # fmt: skip
     """Env b's clearance (agent pairs; capsules at the sample, and along the step when something moved fast),
-    collision and out-of-bounds flags."""
+    collision and out-of-bounds flags.
+
+    Along the step, each agent's straight motion is measured against each capsule in the capsule's frame, which
+    translates from its start a sample before to its start now, with its axis now; for capsules whose axis or
+    radius changed (a turning bar), also with the axis and radius of a sample before, and the smaller gap counts.
+    """
     n, d = pos.shape[1], pos.shape[2]
     best = np.inf
     for q in range(pair_i.shape[0]):
@@ -271,11 +388,20 @@ def contacts_row(  # pragma: no cover
             for c in range(d):
                 moved = max(moved, abs(pos[b, i, c] - pos0[b, i, c]))
         shift = 0.0  # the obstacles' own motion: the relative one is at most the sum
+        turned = False
         for j in range(cur_r.shape[1]):
+            turned = turned or cur_r[b, j] != old_r[b, j]
             for c in range(d):
                 shift = max(shift, abs(cur_a[b, j, c] - old_a[b, j, c]))
+                turned = turned or cur_e[b, j, c] != old_e[b, j, c]
+        if turned:  # the far ends move too
+            for j in range(cur_r.shape[1]):
+                for c in range(d):
+                    shift = max(shift, abs(cur_a[b, j, c] + cur_e[b, j, c] - old_a[b, j, c] - old_e[b, j, c]))
         if moved + shift > fast:
             gap = min(gap, path_clearance(pos0[b], pos[b], old_a[b], cur_a[b], cur_e[b], cur_r[b]) - radius)
+            if turned:
+                gap = min(gap, path_clearance(pos0[b], pos[b], old_a[b], cur_a[b], old_e[b], old_r[b]) - radius)
     oob = False
     for i in range(n):
         for c in range(d):
@@ -335,6 +461,28 @@ def judge_row(  # pragma: no cover
 
 
 @jit
+def verdict_row(  # pragma: no cover
+    b: int, pos: Array, goal: Array, gmax: Array, err: Array, flags: Bools, goal_tol: float, formation_tol: float,
+    streak: Ints, hold_steps: int, end_on_success: bool, k: Ints, max_cycles: int
+) -> None:  # fmt: skip
+    """The judgement of a state without a step (``observe``): the largest goal distance and the flags the step
+    that made the state set, from its own streak (which it does not advance)."""
+    n, d = pos.shape[1], pos.shape[2]
+    far = 0.0
+    for i in range(n):
+        dd = 0.0
+        for c in range(d):
+            dd += (goal[b, i, c] - pos[b, i, c]) ** 2
+        far = max(far, math.sqrt(dd))
+    gmax[b] = far
+    f = flags[b]
+    f[FLAG_AT_GOAL] = far < goal_tol and err[b] < formation_tol and not f[FLAG_COLLISION]
+    f[FLAG_SUCCESS] = streak[b] >= hold_steps
+    f[FLAG_TERMINATED] = f[FLAG_COLLISION] or (end_on_success and f[FLAG_SUCCESS])
+    f[FLAG_TRUNCATED] = k[b] >= max_cycles and not f[FLAG_TERMINATED]
+
+
+@jit
 def straight_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
     """Straight lines: out[i] = |goal_i - pos_i| (m), the default route of the ``approach`` potential."""
     for i in range(pos.shape[0]):
@@ -358,142 +506,117 @@ def finish_obs(  # pragma: no cover
             obs[b, i, j] = min(max(v, obs_low[j]), obs_high[j])
 
 
-@jit
-def arrays(  # pragma: no cover
-    c: Consts, ep: Episode, x0: Array, mem0: Array, pos0: Array, vel0: Array, goal0: Array, gvel0: Array, k0: Ints,
-    gdist0: Array, streak0: Ints, act: Array, x_in: Array, mem_in: Array, new: bool
-) -> StepArrays:  # fmt: skip
-    """The step's arrays: outputs allocated (``new``; the next state x_in, mem_in when the caller stepped the
-    law: a sparse stress) or the state itself (an observation without a step)."""
-    B, n, d = pos0.shape
-    m = ep.cap_r.shape[1] + ep.mov_p.shape[1]
-    e = np.empty
-    if new:
-        x, mem = (e(x0.shape), e(mem0.shape)) if c.law.shape[0] else (x_in, mem_in)
-        pos, vel = e(pos0.shape), e(pos0.shape)
-        goal, gvel, k, gdist, streak = e(pos0.shape), e(pos0.shape), e(B, np.int64), e(gdist0.shape), e(B, np.int64)
-    else:
-        x, mem, pos, vel, goal, gvel, k, gdist, streak = x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0
-    return StepArrays(
-        c, ep, x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0, act, x, mem, pos, vel, goal, gvel, k, gdist,
-        streak, e(B), e((B, d, d)), e((B, d)), np.full(B, np.inf), e(B), np.zeros((B, 6), np.bool_),
-        np.zeros(act.shape[:2]), e((B, m, d)), e((B, m, d)), e((B, m)), e((B, m, d)), e((B, n)), e((B, n)),
-    )  # fmt: skip
+# ---------------------------------------------------------------------------- the parts
+class Part(NamedTuple):
+    """One part of a row of the step.
+
+    Attributes:
+        name: its name.
+        writes: the arrays it writes in the step (``flags:column`` for one column of ``flags``).
+        observe: what it writes in ``observe`` (None: it does not run there).
+        meaning: what it does.
+        rows: the compiled functions it calls in the step, each with the arrays its parameters name
+            (:func:`call`); empty for the parts whose calls depend on the scenario (capsules, goal, route).
+        observe_rows: those it calls in ``observe`` (default: ``rows``).
+    """
+
+    name: str
+    writes: tuple[str, ...]
+    observe: tuple[str, ...] | None
+    meaning: str
+    rows: tuple[Any, ...] = ()
+    observe_rows: tuple[Any, ...] | None = None
 
 
-class Outputs(NamedTuple):
-    """What a step returns of its arrays (:class:`StepArrays` fields of the same names; the compiled step returns
-    them as a plain tuple, since numba boxes a named one much more slowly)."""
+_JUDGED = ("flags:at_goal", "flags:success", "flags:terminated", "flags:truncated")
+#: The parts of a row, in the step's order (``fit`` runs in ``observe`` only, where no step ran).
+PARTS: tuple[Part, ...] = (
+    Part("law", ("act", "effort", "x", "mem", "pos", "vel", "k"), None,
+         "clipped actions, [x', mem'] = [x, u_max a, mem] M, positions, velocities, the sample count", (move_row,)),
+    Part("capsules", ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
+         ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
+         "the static capsules, then each moving type's row at t and at t - T"),
+    Part("contacts", ("clear", "flags:collision", "flags:oob"), ("clear", "flags:collision", "flags:oob"),
+         "clearance of agent pairs and capsules (swept along the step when something moved fast), the box",
+         (contacts_row,)),
+    Part("goal", ("goal", "gvel"), None, "the goal at t (the scenario's pose_row when it moves)"),
+    Part("judge", ("gdist", "gmax", "theta", "bfit", "err", "streak", *_JUDGED), ("gmax", *_JUDGED),
+         "goal distances, the affine fit, the success streak, termination and truncation", (judge_row,),
+         (verdict_row,)),
+    Part("fit", (), ("theta", "bfit", "err"), "the affine fit of the state (observe)", (), (fit_row,)),
+    Part("route", ("route0", "route1"), ("route0", "route1"), "route lengths before and after (scenario's route_row)"),
+)  # fmt: skip
+PART_NAMES = tuple(p.name for p in PARTS)
+_OPTIONAL = ("route",)  # parts that run only when a component reads what they write
 
-    x: Array
-    mem: Array
-    pos: Array
-    vel: Array
-    goal: Array
-    gvel: Array
-    k: Ints
-    gdist: Array
-    streak: Ints
-    err: Array
-    clear: Array
-    gmax: Array
-    flags: Bools
-    effort: Array
-    theta: Array
+
+def _target_array(target: str) -> str:
+    return target.split(":")[0]
 
 
-@jit
-def outputs(s: StepArrays) -> tuple[NDArray[Any], ...]:  # pragma: no cover
-    """The returned part of a step's arrays, in :class:`Outputs` order."""
-    return (s.x, s.mem, s.pos, s.vel, s.goal, s.gvel, s.k, s.gdist, s.streak, s.err, s.clear, s.gmax, s.flags,
-            s.effort, s.theta)  # fmt: skip
+def _check_declaration() -> None:
+    """The declaration is consistent: each written array is declared with its writer, flags' columns exist."""
+    for part in PARTS:
+        for target in (*part.writes, *(part.observe or ())):
+            name, _, col = target.partition(":")
+            if name not in SPECS or part.name not in SPECS[name].writer.split(", "):
+                raise RuntimeError(f"kernel.PARTS: part {part.name!r} writes {name!r}, not declared so in ARRAYS")
+            if col and col not in FLAG_NAMES:
+                raise RuntimeError(f"kernel.PARTS: part {part.name!r} writes unknown flags column {col!r}")
+        for rows, targets in ((part.rows, part.writes), (part.observe_rows, part.observe)):
+            params = {nm for fn in rows or () for nm in _params(fn)}
+            if rows and not {_target_array(t) for t in targets or ()} <= params:
+                raise RuntimeError(f"kernel.PARTS: part {part.name!r} declares writes its rows do not take")
+
+
+# ---------------------------------------------------------------------------- the table
+def _valid(spec: ArraySpec) -> str:
+    """When an array holds its value, in the step and in ``observe``."""
+    if spec.writer in ("engine", "reset"):
+        return "always"
+    if spec.writer == "state":
+        return "whole step; observe: the state"
+    after = " / ".join(w for w in spec.writer.split(", ") if w != "fit")
+    also = {"state": "the state's", "part": "computed at the state", "zeros": "zeros", "": "no (refused)"}
+    return f"after {after}; observe: {also[spec.observe]}"
+
+
+def array_table() -> str:
+    """The Markdown table of every array a component can read (docs/architecture.md holds it; a test compares)."""
+    rows = ["| name | shape | unit | written by | valid | meaning |", "|---|---|---|---|---|---|"]
+    rows += [f"| `{a.name}` | {a.shape} | {a.unit} | {a.writer} | {_valid(a)} | {a.meaning} |" for a in ARRAYS]
+    return "\n".join(rows)
 
 
 # ---------------------------------------------------------------------------- composition
 _COMPOSED: dict[str, Any] = {}
-_TEMPLATE = '''"""Generated by formation_env.env.kernel.compose: one engine's step (do not edit)."""
-import numpy as np
-from numba import njit, prange
-from formation_env.env.kernel import (
-    affine_into, arrays, contacts_row, finish_obs, fit_row, judge_row, move_row, outputs, static_capsules, static_goal,
-)
-{imports}
-
-
-@njit(cache=True)
-def step(c, ep, x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0, act, x_in, mem_in, noise):
-    s = arrays(c, ep, x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0, act, x_in, mem_in, True)
-    B, n_l, D, d = act.shape[0], act.shape[1], c.obs_low.shape[0], pos0.shape[2]
-    buf, obs, rew = np.zeros((B, n_l, D)), np.empty((B, n_l, D), np.float32), np.zeros((B, n_l))
-    ms = ep.cap_r.shape[1]
-{unpack}
-    for b in range(B):
-        pose = np.empty((d, d + 1))
-{step_row}
-    return outputs(s), obs, rew
-
-
-@njit(cache=True, parallel=True)
-def step_parallel(c, ep, x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0, act, x_in, mem_in, noise):
-    s = arrays(c, ep, x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0, act, x_in, mem_in, True)
-    B, n_l, D, d = act.shape[0], act.shape[1], c.obs_low.shape[0], pos0.shape[2]
-    buf, obs, rew = np.zeros((B, n_l, D)), np.empty((B, n_l, D), np.float32), np.zeros((B, n_l))
-    ms = ep.cap_r.shape[1]
-{unpack}
-    for b in prange(B):
-        pose = np.empty((d, d + 1))
-{step_row}
-    return outputs(s), obs, rew
-
-
-@njit(cache=True)
-def observe(c, ep, x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0, act, x_in, mem_in, noise):
-    s = arrays(c, ep, x0, mem0, pos0, vel0, goal0, gvel0, k0, gdist0, streak0, act, x_in, mem_in, False)
-    B, n_l, D = act.shape[0], act.shape[1], c.obs_low.shape[0]
-    buf, obs = np.zeros((B, n_l, D)), np.empty((B, n_l, D), np.float32)
-    ms = ep.cap_r.shape[1]
-{unpack}
-    for b in range(B):
-{observe_row}
-    return obs, s.theta
-'''
-#: Where a component's argument of a given name comes from: the generated step unpacks the step's arrays into
-#: local names before its loop over the rows (numba's threaded loop takes arrays, not the records).
-_SOURCES: dict[str, str] = {
-    **{f: f"s.{f}" for f in StepArrays._fields if f not in ("c", "ep")},
-    **{f: f"s.c.{f}" for f in Consts._fields},
-    **{f: f"s.ep.{f}" for f in Episode._fields},
-}
-_LOCALS = ("b", "buf", "obs", "noise", "rew", "pose", "ms")
-
-
-def _source(fn: Any) -> str:
-    """The source of a component's module (a changed component recompiles), or a key unique to this process when
-    it has none on file (a notebook cell): that composition then compiles once per process."""
-    try:
-        return inspect.getsource(sys.modules[_name(fn)[0]])
-    except (OSError, TypeError, KeyError):
-        return f"{os.getpid()}:{id(fn)}"
+#: Names a part's line may use beside the arrays: the row, the observation buffers, the rewards, a pose.
+_LOCALS = ("b", "buf", "obs", "noise", "rew", "pose")
+_INPUTS = ("c", "ep", *(a.name for a in STATE_INPUTS), "act", "x_in", "mem_in", "noise")
 
 
 def _name(fn: Any) -> tuple[str, str]:
     py = getattr(fn, "py_func", fn)
-    return py.__module__, py.__name__
+    return py.__module__, py.__qualname__
+
+
+def _params(fn: Any) -> list[str]:
+    return list(inspect.signature(getattr(fn, "py_func", fn)).parameters)
 
 
 def call(fn: Any, alias: str = "", **given: str) -> str:
-    """The generated call of a component: each parameter named after a field of the step's arrays
-    (:class:`StepArrays`, :class:`Consts`, :class:`Episode`) gets that array, ``b`` the row, the others what
-    ``given`` says (e.g. a block's ``out`` and ``lo``); ``alias``: the name the step imports it under."""
-    py = getattr(fn, "py_func", fn)
-    names = inspect.signature(py).parameters
-    unknown = [nm for nm in names if nm not in given and nm not in _SOURCES and nm not in _LOCALS]
+    """The generated call of a component: each parameter named after an array of the step (:data:`ARRAYS`) gets
+    that array, ``b`` the row, the others what ``given`` says (e.g. a block's ``out`` and ``lo``); ``alias``: the
+    name the step knows it by. An unknown name raises TypeError naming the function, the name and the arrays."""
+    names = _params(fn)
+    unknown = [nm for nm in names if nm not in given and nm not in SPECS and nm not in _LOCALS]
     if unknown:
+        mod, qual = _name(fn)
         raise TypeError(
-            f"{py.__module__}.{py.__name__}: parameters {unknown} are not arrays of the step "
-            f"(kernel.StepArrays, Consts, Episode) nor {sorted(given)}"
+            f"{mod}.{qual}: parameter {unknown[0]!r} is not an array of the step nor one of {sorted(given)}; "
+            f"the arrays are {', '.join(a.name for a in ARRAYS)} (docs/architecture.md, kernel.ARRAYS)"
         )
-    return f"{alias or py.__name__}({', '.join(given.get(nm, nm) for nm in names)})"
+    return f"{alias or getattr(fn, '__name__', _name(fn)[1])}({', '.join(given.get(nm, nm) for nm in names)})"
 
 
 def cache_folder() -> str:
@@ -513,70 +636,252 @@ def cache_folder() -> str:
     raise OSError(f"no writable folder for the compiled steps; set FORMATION_ENV_CACHE (tried {given or home!r})")
 
 
-def compose(
-    blocks: Sequence[tuple[Any, int]], terms: Sequence[Any], route: Any, moving: Any = None, pose: Any = None
-) -> Any:
-    """The compiled module of an engine's components: ``step`` and ``observe``.
+def _reads(lines: Sequence[str]) -> set[str]:
+    """The arrays that generated lines name."""
+    return {nm for line in lines for nm in re.findall(r"[A-Za-z_]\w*", line)} & set(SPECS)
 
-    ``blocks``: (row function, first entry) of each observation block; ``terms``: the row functions of the
-    reward terms of nonzero weight, in ``Consts.weights`` order; ``route``: the scenario's route row, or None
-    when no term reads it; ``moving``: the row of the scenario's moving obstacle type
-    ``row(p (M, w), t, bounds, a (M, d), e (M, d), rad (M,))`` or None; ``pose``: the scenario's
-    ``pose_row(goal_p (w,), t, out (d, d + 1))`` of a moving goal, or None (a static goal). Each component's
-    arguments are named after the step's arrays (:func:`call`). The source is written to a cache folder
-    (:func:`cache_folder`), named by its hash and its components', and compiled
-    with numba's disk cache, so a composition compiles once per machine.
+
+class _Composer:
+    """The source of one engine's step and observe (see :func:`compose`)."""
+
+    def __init__(self, moving: Sequence[Any], pose: Any, route: Any, alias: Callable[[Any], str]) -> None:
+        self.moving, self.pose, self.route, self.alias = list(moving), pose, route, alias
+
+    def part_lines(self, part: str, observe: bool) -> list[str]:
+        decl = PARTS[PART_NAMES.index(part)]
+        rows = decl.observe_rows if observe and decl.observe_rows is not None else decl.rows
+        if rows:
+            return [call(fn) for fn in rows]
+        if part == "capsules":
+            lines = [call(static_capsules)]
+            for j, row in enumerate(self.moving):
+                nm, sl = self.alias(row), f"[b, m{j}:m{j + 1}]"
+                for t, pre in (("k[b] * dt", "cur"), ("k[b] * dt" if observe else "(k[b] - 1) * dt", "old")):
+                    lines.append(f"{nm}(mov_p{j}[b], {t}, bounds, {pre}_a{sl}, {pre}_e{sl}, {pre}_r{sl})")
+            return lines
+        if part == "goal":
+            if self.pose is None:
+                return [call(static_goal)]
+            nm = self.alias(self.pose)
+            return [
+                "pose = np.empty((d, d + 1))",
+                f"{nm}(goal_p[b], k[b] * dt, pose)",
+                "affine_into(r, pose, goal[b])",
+                f"{nm}(goal_p[b], (k[b] + 1) * dt, pose)",
+                "affine_into(r, pose, gvel[b])",
+                "gvel[b] = (gvel[b] - goal[b]) / dt",
+            ]
+        if part == "route":
+            nm = self.alias(self.route)
+            return [f"{nm}(pvec[b], radius, {p}[b], {g}[b], {r}[b])"
+                    for p, g, r in (("pos0", "goal0", "route0"), ("pos", "goal", "route1"))]  # fmt: skip
+        raise KeyError(part)  # pragma: no cover
+
+
+def _writers(observe: bool) -> dict[str, list[str]]:
+    """array name -> the parts that write it (in step order) in the step or in observe."""
+    out: dict[str, list[str]] = {}
+    for part in PARTS:
+        targets = part.observe if observe else (part.writes if part.name != "fit" else None)
+        for target in targets or ():
+            out.setdefault(_target_array(target), [])
+            if part.name not in out[_target_array(target)]:
+                out[_target_array(target)].append(part.name)
+    return out
+
+
+def _schedule(wanted: set[str], observe: bool, composer: _Composer, always: Sequence[str]) -> list[str]:
+    """The parts to run, in step order: ``always`` and the writers of the ``wanted`` arrays, with the parts they
+    read in turn."""
+    writers = _writers(observe)
+    chosen = set(always)
+    todo = [w for nm in wanted for w in writers.get(nm, [])]
+    while todo:
+        part = todo.pop()
+        if part in chosen:
+            continue
+        chosen.add(part)
+        for nm in _reads(composer.part_lines(part, observe)):
+            todo += writers.get(nm, [])
+    return [p for p in PART_NAMES if p in chosen]
+
+
+def _check_writers(parts: Sequence[str], observe: bool, where: str) -> None:
+    """Each array (each column of flags) has one writer among the scheduled parts."""
+    seen: dict[str, str] = {}
+    for part in PARTS:
+        if part.name not in parts:
+            continue
+        for target in (part.observe if observe else part.writes) or ():
+            if target in seen:
+                raise RuntimeError(f"{where}: {target!r} is written by parts {seen[target]!r} and {part.name!r}")
+            seen[target] = part.name
+
+
+_TEMPLATE = '''"""Generated by formation_env.env.kernel.compose: one engine's step (do not edit)."""
+import numpy as np
+from numba import njit, prange
+from formation_env.env.kernel import affine_into, finish_obs, static_capsules, static_goal
+
+
+@njit(cache=True)
+def step({inputs}):
+{head}
+    buf, obs, rew = np.zeros((B, n_l, D)), np.empty((B, n_l, D), np.float32), np.zeros((B, n_l))
+{step_alloc}
+    for b in range(B):
+{step_row}
+    return ({outputs},), obs, rew
+
+
+@njit(cache=True, parallel=True)
+def step_parallel({inputs}):
+{head}
+    buf, obs, rew = np.zeros((B, n_l, D)), np.empty((B, n_l, D), np.float32), np.zeros((B, n_l))
+{step_alloc}
+    for b in prange(B):
+{step_row}
+    return ({outputs},), obs, rew
+
+
+@njit(cache=True)
+def observe({inputs}):
+{head}
+    buf, obs = np.zeros((B, n_l, D)), np.empty((B, n_l, D), np.float32)
+{observe_alloc}
+    for b in range(B):
+{observe_row}
+    return obs, theta
+'''
+
+
+def _component(kind: str, name: str, fn: Any, given: dict[str, str], alias: str) -> str:
+    """The call of a component, or TypeError naming the component when it names an unknown array."""
+    try:
+        return call(fn, alias, **given)
+    except TypeError as exc:
+        raise TypeError(f"{kind} {name!r}: {exc}") from None
+
+
+def compose(
+    blocks: Sequence[tuple[str, Any, int]],
+    terms: Sequence[tuple[str, Any]],
+    route: Any = None,
+    moving: Sequence[Any] = (),
+    pose: Any = None,
+) -> Any:
+    """The compiled module of an engine's components: ``step``, ``step_parallel`` and ``observe``.
+
+    ``blocks``: (name, row function, first entry) of each observation block; ``terms``: (name, row function) of
+    the reward terms of nonzero weight, in ``Consts.weights`` order; ``route``: the scenario's route row (run only
+    when a component reads ``route0`` or ``route1``; None: :func:`straight_route`); ``moving``: the rows of the
+    scenario's moving obstacle types ``row(p (M, w), t, bounds, a (M, d), e (M, d), rad (M,))``, in capsule order;
+    ``pose``: the scenario's ``pose_row(goal_p (w,), t, out (d, d + 1))`` of a moving goal, or None (a static
+    goal). Each component's parameters are named after the step's arrays (:func:`call`).
+
+    Raises TypeError naming the component when it names no array of the step, or when a block reads an array that
+    ``observe`` does not have (:data:`ARRAYS`: ``observe``). The source is written to a cache folder
+    (:func:`cache_folder`) under a name made of its hash and of the stamps of every function it compiles
+    (:func:`~formation_env.env._numba.source_stamp`), so a composition compiles once per machine and again after
+    any of their sources changed.
     """
-    funcs = [fn for fn, _ in blocks] + list(terms) + [f for f in (route, moving, pose) if f is not None]
-    alias = {id(fn): f"{_name(fn)[1]}_fn{i}" for i, fn in enumerate(funcs)}  # apart from the arrays' names
-    imports = [f"from {_name(fn)[0]} import {_name(fn)[1]} as {alias[id(fn)]}" for fn in funcs]
-    moving_lines = []
-    if moving is not None:
-        nm = alias[id(moving)]
-        moving_lines = [f"{nm}(mov_p[b], {t}, bounds, {a}[b, ms:], cur_e[b, ms:], cur_r[b, ms:])"
-                        for t, a in (("k[b] * dt", "cur_a"), ("(k[b] - 1) * dt", "old_a"))]  # fmt: skip
-    goal_lines = [call(static_goal)]
-    if pose is not None:
-        nm = alias[id(pose)]
-        goal_lines = [
-            f"{nm}(goal_p[b], k[b] * dt, pose)",
-            "affine_into(r, pose, goal[b])",
-            f"{nm}(goal_p[b], (k[b] + 1) * dt, pose)",
-            "affine_into(r, pose, gvel[b])",
-            "gvel[b] = (gvel[b] - goal[b]) / dt",
-        ]
-    route_lines = []
-    if route is not None:
-        nm = alias[id(route)]
-        route_lines = [f"{nm}(pvec[b], radius, {p}[b], {g}[b], {r}[b])"
-                       for p, g, r in (("pos0", "goal0", "route0"), ("pos", "goal", "route1"))]  # fmt: skip
-    block_lines = [call(fn, alias[id(fn)], out="buf[b]", lo=str(lo)) for fn, lo in blocks]
+    route = straight_route if route is None else route
+    funcs: list[Any] = [fn for _, fn, _ in blocks] + [fn for _, fn in terms] + [route, *moving]
+    funcs += [pose] if pose is not None else []
+    aliases: dict[int, str] = {}
+    for fn in funcs:
+        aliases.setdefault(id(fn), re.sub(r"\W", "_", _name(fn)[1]) + f"_fn{len(aliases)}")
+    composer = _Composer(moving, pose, route, lambda fn: aliases[id(fn)])
+    term_lines = [_component("reward term", nm, fn, {"out": "rew[b]", "w": f"weights[{i}]"}, aliases[id(fn)])
+                  for i, (nm, fn) in enumerate(terms)]  # fmt: skip
+    block_lines = [_component("observation block", nm, fn, {"out": "buf[b]", "lo": str(lo)}, aliases[id(fn)])
+                   for nm, fn, lo in blocks]  # fmt: skip
+    for (nm, fn, _), line in zip(blocks, block_lines, strict=True):
+        missing = sorted(a for a in _reads([line]) if SPECS[a].observe == "")
+        if missing:
+            raise TypeError(
+                f"observation block {nm!r} ({'.'.join(_name(fn))}) reads {missing[0]!r}, which the reset's "
+                f"observation (Engine.observe, no step) does not have; a block may read the arrays whose 'valid' "
+                "column of kernel.array_table() says observe: ..."
+            )
     obs_lines = [*block_lines, call(finish_obs)]
-    step_row = [call(move_row), call(static_capsules), *moving_lines, call(contacts_row), *goal_lines, call(judge_row)]
-    term_lines = [call(fn, alias[id(fn)], out="rew[b]", w=f"weights[{i}]") for i, fn in enumerate(terms)]
-    step_row += route_lines + term_lines + obs_lines
-    observe_row = [call(fit_row), call(static_capsules), *moving_lines[:1], *obs_lines]
-    used = sorted({nm for line in step_row + observe_row for nm in re.findall(r"[A-Za-z_]\w*", line)} & set(_SOURCES))
+    wanted = _reads(term_lines + block_lines)
+    always = [p for p in PART_NAMES if p not in _OPTIONAL and p != "fit"]
+    step_parts = _schedule(wanted, False, composer, always)
+    observe_parts = _schedule(_reads(block_lines) | {"theta"}, True, composer, ["fit"])
+    _check_writers(step_parts, False, "step")
+    _check_writers(observe_parts, True, "observe")
+    step_row = [line for p in step_parts for line in composer.part_lines(p, False)] + term_lines + obs_lines
+    observe_row = [line for p in observe_parts for line in composer.part_lines(p, True)] + obs_lines
+    step_alloc, observe_alloc = _alloc(step_row, step_parts, False), _alloc(observe_row, observe_parts, True)
     src = _TEMPLATE.format(
-        imports="\n".join(imports),
-        unpack="\n".join(f"    {nm} = {_SOURCES[nm]}" for nm in used),
+        inputs=", ".join(_INPUTS),
+        head=_head([*step_row, *observe_row, step_alloc, observe_alloc], len(moving)),
+        step_alloc=step_alloc,
+        observe_alloc=observe_alloc,
         step_row="\n".join("        " + line for line in step_row),
         observe_row="\n".join("        " + line for line in observe_row),
+        outputs=", ".join(Outputs._fields),
     )
-    code = [inspect.getsource(sys.modules[__name__])] + [_source(fn) for fn in funcs]
-    key = hashlib.sha1("".join([src, *code]).encode()).hexdigest()[:16]
+    part_rows = {fn.__name__: fn for part in PARTS for fn in (*part.rows, *(part.observe_rows or ()))}
+    kernel_funcs = [affine_into, finish_obs, static_capsules, static_goal, *part_rows.values()]
+    stamps = [f"{'.'.join(_name(fn))}={source_stamp(fn)}" for fn in kernel_funcs + funcs]
+    key = hashlib.sha1("\n".join([src, *stamps]).encode()).hexdigest()[:16]
     if key not in _COMPOSED:
-        folder = cache_folder()
-        path = os.path.join(folder, f"step_{key}.py")
-        if not os.path.exists(path):
-            tmp = f"{path}.{os.getpid()}"
-            with open(tmp, "w") as fh:
-                fh.write(src)
-            os.replace(tmp, path)
-        spec = importlib.util.spec_from_file_location(f"formation_env_steps.step_{key}", path)
-        assert spec is not None and spec.loader is not None
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[spec.name] = mod
-        spec.loader.exec_module(mod)
-        _COMPOSED[key] = mod
+        _COMPOSED[key] = _load(key, src, {**part_rows, **{aliases[id(fn)]: fn for fn in funcs}})
     return _COMPOSED[key]
+
+
+def _head(lines: Sequence[str], n_moving: int) -> str:
+    """The generated function's first lines: the sizes, the constants and episode arrays it reads, the moving
+    types' capsule ranges."""
+    used = _reads(lines) | {"obs_low", "cap_r"}
+    out = ["B, n, d = pos0.shape", "n_l = act.shape[1]", "D = obs_low.shape[0]"]
+    out = [f"{nm} = c.{nm}" for nm in Consts._fields if nm in used] + out
+    out += [f"{nm} = ep.{nm}" for nm in Episode._fields if nm in used]
+    out += [f"mov_p{j} = ep.mov_p[{j}]" for j in range(n_moving)]
+    out += ["m0 = cap_r.shape[1]"] + [f"m{j + 1} = m{j} + mov_p{j}.shape[1]" for j in range(n_moving)]
+    out += [f"m = m{n_moving}"]
+    return "\n".join("    " + line for line in out)
+
+
+def _alloc(lines: Sequence[str], parts: Sequence[str], observe: bool) -> str:
+    """The allocation of every array the scheduled parts write and of the outputs (in observe, the state's arrays
+    stand for the state after the step, and ``act`` is zeros)."""
+    names = {_target_array(t) for p in PARTS if p.name in parts for t in ((p.observe if observe else p.writes) or ())}
+    names |= _reads(lines) & {a.name for a in ARRAYS if a.writer not in ("state", "engine", "reset")}
+    if not observe:
+        names |= set(Outputs._fields)
+    out = []
+    for spec in ARRAYS:
+        if spec.name not in names or spec.name == "act":
+            continue
+        if observe and spec.observe == "state":
+            out.append(f"{spec.name} = {spec.name}0")
+        else:
+            out.append(f"{spec.name} = {spec.alloc}")
+    if observe and "theta" not in names:  # pragma: no cover  (fit always runs in observe)
+        out.append("theta = np.empty((B, d, d))")
+    return "\n".join("    " + line for line in out)
+
+
+def _load(key: str, src: str, funcs: dict[str, Any]) -> Any:
+    """The generated module ``src`` under ``key`` in the cache folder, its components given as globals."""
+    folder = cache_folder()
+    path = os.path.join(folder, f"step_{key}.py")
+    if not os.path.exists(path):
+        tmp = f"{path}.{os.getpid()}"
+        with open(tmp, "w") as fh:
+            fh.write(src)
+        os.replace(tmp, path)
+    spec = importlib.util.spec_from_file_location(f"formation_env_steps.step_{key}", path)
+    if spec is None or spec.loader is None:  # pragma: no cover
+        raise ImportError(f"cannot load the composed step {path}")
+    mod = importlib.util.module_from_spec(spec)
+    mod.__dict__.update(funcs)
+    sys.modules[spec.name] = mod
+    spec.loader.exec_module(mod)
+    return mod
+
+
+_check_declaration()

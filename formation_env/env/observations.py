@@ -5,9 +5,9 @@ A leader's observation is its blocks side by side (``Engine(observation=[...])``
 and Gaussian noise of ``obs_noise`` (in each entry's own units) is added first to the blocks that are
 measurements (``noisy``). A block's ``row(b, out, lo, ...)`` is a compiled function that writes env b's
 entries of every leader i into ``out[i, lo:lo + size]``; its other parameters are named after the step's
-arrays it reads (:func:`formation_env.env.kernel.call`: ``pos``, ``leaders``, ``theta``, ...). A new block is
-one :func:`register_block` call; the env's docstring table is :func:`observation_table` of the registry
-(``FormationEnv`` lists its symbols), so it cannot drift from the code.
+arrays it reads (:data:`formation_env.env.kernel.ARRAYS`: ``pos``, ``leaders``, ``theta``, ...). A new block is
+one :func:`observation_block` decoration (or a :func:`register_block` call); the env's docstring table is
+:func:`observation_table` of the registry (``FormationEnv`` lists its symbols), so it cannot drift from the code.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from .obstacles import ray_range
 #: this module needs nothing of the engine's).
 Engine = Any
 
-__all__ = ["DEFAULT_OBSERVATION", "OBS_BLOCKS", "ObsBlock", "observation_table", "register_block"]
+__all__ = ["DEFAULT_OBSERVATION", "OBS_BLOCKS", "ObsBlock", "observation_block", "observation_table", "register_block"]
 
 Array = NDArray[np.float64]
 Ints = NDArray[np.int64]
@@ -82,6 +82,27 @@ def register_block(block: ObsBlock) -> ObsBlock:
     return block
 
 
+def observation_block(
+    name: str,
+    size: Callable[[Engine], int],
+    bounds: Callable[[Engine], Bounds],
+    meaning: str,
+    *,
+    size_text: str,
+    bounds_text: str,
+    noisy: bool = True,
+) -> Callable[[Callable[..., None]], Any]:
+    """Register the decorated ``row(b, out, lo, ...)`` as observation block ``name`` (the fields of
+    :class:`ObsBlock`); the function becomes its compiled row."""
+
+    def add(fn: Callable[..., None]) -> Any:
+        row = jit(fn)
+        register_block(ObsBlock(name, size_text, size, bounds, row, meaning, bounds_text, noisy))
+        return row
+
+    return add
+
+
 def observation_table() -> str:
     """The Markdown table of every registered block (the env's docstring holds it; a test compares)."""
     rows = ["| block | size | meaning | bounds |", "|---|---|---|---|"]
@@ -97,22 +118,38 @@ def _extent(eng: Engine) -> Array:
     return np.asarray(eng.bounds[1] - eng.bounds[0], dtype=np.float64)
 
 
-# ---------------------------------------------------------------------------- the blocks' rows
-@jit
+# ---------------------------------------------------------------------------- the blocks
+def _obstacle_size(eng: Engine) -> int:
+    return eng.n_rays if eng.d == 2 else eng.n_nearest * eng.d
+
+
+def _nearest_bounds(eng: Engine) -> Bounds:
+    one_lo = np.concatenate([-_extent(eng), [0.0]])
+    one_hi = np.concatenate([_extent(eng), [1.0]])
+    return np.tile(one_lo, eng.k_nearest), np.tile(one_hi, eng.k_nearest)
+
+
+@observation_block("position", lambda e: e.d, lambda e: (e.bounds[0], e.bounds[1]), "own position p_i (m)",
+                   size_text="d", bounds_text="W")  # fmt: skip
 def position(b: int, out: Array, lo: int, leaders: Ints, pos: Array) -> None:  # pragma: no cover
     for i, a in enumerate(leaders):
         for k in range(pos.shape[2]):
             out[i, lo + k] = pos[b, a, k]
 
 
-@jit
+@observation_block("velocity", lambda e: e.d, lambda e: _fill(e.d, -e.v_bound, e.v_bound), "own velocity (m/s)",
+                   size_text="d", bounds_text="+-v")  # fmt: skip
 def velocity(b: int, out: Array, lo: int, leaders: Ints, vel: Array) -> None:  # pragma: no cover
     for i, a in enumerate(leaders):
         for k in range(vel.shape[2]):
             out[i, lo + k] = vel[b, a, k]
 
 
-@jit
+@observation_block(
+    "other_leaders", lambda e: (e.n_l - 1) * e.d,
+    lambda e: (np.tile(-_extent(e), e.n_l - 1), np.tile(_extent(e), e.n_l - 1)),
+    "p_j - p_i for the other leaders, in leader order (m)", size_text="(n_l - 1) d", bounds_text="+-E",
+)  # fmt: skip
 def other_leaders(b: int, out: Array, lo: int, leaders: Ints, others: Ints, pos: Array) -> None:  # pragma: no cover
     d = pos.shape[2]
     for i in range(leaders.shape[0]):
@@ -121,21 +158,26 @@ def other_leaders(b: int, out: Array, lo: int, leaders: Ints, others: Ints, pos:
                 out[i, lo + j * d + k] = pos[b, leaders[others[i, j]], k] - pos[b, leaders[i], k]
 
 
-@jit
+@observation_block("goal", lambda e: e.d, lambda e: (-_extent(e), _extent(e)),
+                   "own goal (reference) position minus p_i (m)", size_text="d", bounds_text="+-E")  # fmt: skip
 def goal(b: int, out: Array, lo: int, leaders: Ints, pos: Array, goal: Array) -> None:  # pragma: no cover
     for i, a in enumerate(leaders):
         for k in range(pos.shape[2]):
             out[i, lo + k] = goal[b, a, k] - pos[b, a, k]
 
 
-@jit
+@observation_block("goal_velocity", lambda e: e.d, lambda e: _fill(e.d, -e.v_bound, e.v_bound),
+                   "velocity of the own goal position (m/s; 0 if static)", size_text="d",
+                   bounds_text="+-v")  # fmt: skip
 def goal_velocity(b: int, out: Array, lo: int, leaders: Ints, gvel: Array) -> None:  # pragma: no cover
     for i, a in enumerate(leaders):
         for k in range(gvel.shape[2]):
             out[i, lo + k] = gvel[b, a, k]
 
 
-@jit
+@observation_block("theta", lambda e: e.d * e.d, lambda e: _fill(e.d * e.d, -e.theta_clip, e.theta_clip),
+                   "Theta of the least-squares affine fit of all agents, row-major", size_text="d^2",
+                   bounds_text="+-3")  # fmt: skip
 def theta(b: int, out: Array, lo: int, theta: Array) -> None:  # pragma: no cover
     d = theta.shape[1]
     for i in range(out.shape[0]):
@@ -144,19 +186,27 @@ def theta(b: int, out: Array, lo: int, theta: Array) -> None:  # pragma: no cove
                 out[i, lo + r * d + k] = theta[b, r, k]
 
 
-@jit
+@observation_block("time", lambda e: 1, lambda e: _fill(1, 0.0, 1.0), "k / max_cycles", size_text="1",
+                   bounds_text="[0, 1]", noisy=False)  # fmt: skip
 def time(b: int, out: Array, lo: int, k: Ints, max_cycles: int) -> None:  # pragma: no cover
     for i in range(out.shape[0]):
         out[i, lo] = k[b] / max_cycles
 
 
-@jit
+@observation_block("formation_error", lambda e: 1, lambda e: _fill(1, 0.0, float(np.linalg.norm(_extent(e)))),
+                   "RMS distance of all agents from their affine fit (m)", size_text="1",
+                   bounds_text="[0, \\|E\\|]")  # fmt: skip
 def formation_error(b: int, out: Array, lo: int, err: Array) -> None:  # pragma: no cover
     for i in range(out.shape[0]):
         out[i, lo] = err[b]
 
 
-@jit
+@observation_block(
+    "obstacles", _obstacle_size, lambda e: _fill(_obstacle_size(e), 0.0 if e.d == 2 else -1.0, 1.0),
+    "2D: range to the first obstacle along world rays at angles 2 pi j / R, divided by the sensing range; "
+    "3D: per nearest obstacle, unit direction times (1 - surface distance / range)^+",
+    size_text="2D: R; 3D: N d", bounds_text="[0, 1]; 3D [-1, 1]",
+)  # fmt: skip
 def obstacles(  # pragma: no cover
     b: int, out: Array, lo: int, leaders: Ints, pos: Array, cur_a: Array, cur_e: Array, cur_r: Array,
     obstacle_range: float, ray_dirs: Array, n_nearest: int
@@ -199,7 +249,11 @@ def obstacles(  # pragma: no cover
                     out[i, lo + q * d + k] = toward[j, k] / norm * mag
 
 
-@jit
+@observation_block(
+    "nearest_agents", lambda e: e.k_nearest * (e.d + 1), _nearest_bounds,
+    "the k nearest other agents (followers too) within ``sense_radius``, nearest first: p_j - p_i (m) and "
+    "1 if seen (an unseen slot is all 0)", size_text="k (d + 1)", bounds_text="+-E, [0, 1]",
+)  # fmt: skip
 def nearest_agents(  # pragma: no cover
     b: int, out: Array, lo: int, leaders: Ints, pos: Array, k_nearest: int, sense_radius: float
 ) -> None:
@@ -222,7 +276,8 @@ def nearest_agents(  # pragma: no cover
                 out[i, lo + q * w + d] = 1.0
 
 
-@jit
+@observation_block("agent_id", lambda e: e.n_l, lambda e: _fill(e.n_l, 0.0, 1.0), "one-hot of the leader's index",
+                   size_text="n_l", bounds_text="{0, 1}", noisy=False)  # fmt: skip
 def agent_id(b: int, out: Array, lo: int) -> None:  # pragma: no cover
     n_l = out.shape[0]
     for i in range(n_l):
@@ -230,87 +285,6 @@ def agent_id(b: int, out: Array, lo: int) -> None:  # pragma: no cover
             out[i, lo + j] = 1.0 if i == j else 0.0
 
 
-# ---------------------------------------------------------------------------- the blocks
-register_block(
-    ObsBlock(
-        "position", "d", lambda e: e.d, lambda e: (e.bounds[0], e.bounds[1]), position, "own position p_i (m)", "W"
-    )
-)  # fmt: skip
-register_block(
-    ObsBlock(
-        "velocity", "d", lambda e: e.d, lambda e: _fill(e.d, -e.v_bound, e.v_bound), velocity,
-        "own velocity (m/s)", "+-v",
-    )
-)  # fmt: skip
-register_block(
-    ObsBlock(
-        "other_leaders", "(n_l - 1) d", lambda e: (e.n_l - 1) * e.d,
-        lambda e: (np.tile(-_extent(e), e.n_l - 1), np.tile(_extent(e), e.n_l - 1)),
-        other_leaders, "p_j - p_i for the other leaders, in leader order (m)", "+-E",
-    )
-)  # fmt: skip
-register_block(
-    ObsBlock(
-        "goal", "d", lambda e: e.d, lambda e: (-_extent(e), _extent(e)), goal,
-        "own goal (reference) position minus p_i (m)", "+-E",
-    )
-)  # fmt: skip
-register_block(
-    ObsBlock(
-        "goal_velocity", "d", lambda e: e.d, lambda e: _fill(e.d, -e.v_bound, e.v_bound), goal_velocity,
-        "velocity of the own goal position (m/s; 0 if static)", "+-v",
-    )
-)  # fmt: skip
-register_block(
-    ObsBlock(
-        "theta", "d^2", lambda e: e.d * e.d, lambda e: _fill(e.d * e.d, -e.theta_clip, e.theta_clip), theta,
-        "Theta of the least-squares affine fit of all agents, row-major", "+-3",
-    )
-)  # fmt: skip
-register_block(
-    ObsBlock("time", "1", lambda e: 1, lambda e: _fill(1, 0.0, 1.0), time, "k / max_cycles", "[0, 1]", noisy=False)
-)  # fmt: skip
-register_block(
-    ObsBlock(
-        "formation_error", "1", lambda e: 1, lambda e: _fill(1, 0.0, float(np.linalg.norm(_extent(e)))),
-        formation_error, "RMS distance of all agents from their affine fit (m)", "[0, \\|E\\|]",
-    )
-)  # fmt: skip
-
-
-def _obstacle_size(eng: Engine) -> int:
-    return eng.n_rays if eng.d == 2 else eng.n_nearest * eng.d
-
-
-register_block(
-    ObsBlock(
-        "obstacles", "2D: R; 3D: N d", _obstacle_size,
-        lambda e: _fill(_obstacle_size(e), 0.0 if e.d == 2 else -1.0, 1.0), obstacles,
-        "2D: range to the first obstacle along world rays at angles 2 pi j / R, divided by the sensing range; "
-        "3D: per nearest obstacle, unit direction times (1 - surface distance / range)^+", "[0, 1]; 3D [-1, 1]",
-    )
-)  # fmt: skip
-
-
-def _nearest_bounds(eng: Engine) -> Bounds:
-    one_lo = np.concatenate([-_extent(eng), [0.0]])
-    one_hi = np.concatenate([_extent(eng), [1.0]])
-    return np.tile(one_lo, eng.k_nearest), np.tile(one_hi, eng.k_nearest)
-
-
-register_block(
-    ObsBlock(
-        "nearest_agents", "k (d + 1)", lambda e: e.k_nearest * (e.d + 1), _nearest_bounds, nearest_agents,
-        "the k nearest other agents (followers too) within ``sense_radius``, nearest first: p_j - p_i (m) and "
-        "1 if seen (an unseen slot is all 0)", "+-E, [0, 1]",
-    )
-)  # fmt: skip
-register_block(
-    ObsBlock(
-        "agent_id", "n_l", lambda e: e.n_l, lambda e: _fill(e.n_l, 0.0, 1.0), agent_id,
-        "one-hot of the leader's index", "{0, 1}", noisy=False,
-    )
-)  # fmt: skip
 register_block(
     ObsBlock(
         "task", "scenario's", lambda e: len(e.scenario.task_feature_bounds()[0]),

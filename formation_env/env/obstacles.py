@@ -4,7 +4,10 @@ Every obstacle type turns its per-episode parameters into *capsules* at time t: 
 ``e`` thickened by a radius ``rad`` (a wall is a capsule of radius 0; a circle or sphere one of length 0). The
 step asks only for capsules, so the clearance, the swept contact within a step, the ray and the nearest-
 obstacle readings below serve every type, and a new type (a box, a rotating bar, a polygon) is one class that
-says where its capsules are at time t. The step never switches on a scenario or on an obstacle type.
+says where its capsules are at time t. The step never switches on a scenario or on an obstacle type. A moving
+type is its compiled ``row(p, t, bounds, a, e, rad)`` (its capsules at time t, for one env), from which the
+numpy ``capsules`` of the reset, the renderer and the global state follow; a scenario may have any number of
+moving types (their capsules follow the static ones, type after type, in ``obstacle_types`` order).
 
 =================  ==========================  =============================================================
 type               ``params[key]`` per episode  capsules at time t
@@ -80,21 +83,41 @@ class Obstacle:
     row: ClassVar[Any] = None
 
     def capsules(self, p: Array, t: Array, bounds: Array) -> Capsules:
-        """The capsules at times t (B,) s of the obstacles ``p`` (B, m, width) in the world box ``bounds`` (2, d)."""
-        raise NotImplementedError
+        """The capsules at times t (B,) s of the obstacles ``p`` (B, m, width) in the world box ``bounds`` (2, d).
+
+        A moving type gets it from its compiled ``row``, env by env (the same code as the step's); a static type
+        says it in numpy (it runs once per episode, at the reset)."""
+        if self.row is None:
+            raise NotImplementedError(f"{type(self).__name__}: a static obstacle type defines capsules()")
+        p = np.ascontiguousarray(p, dtype=np.float64)
+        B, m, d = p.shape[0], p.shape[1], bounds.shape[1]
+        times = np.broadcast_to(np.asarray(t, dtype=np.float64), (B,))
+        out = Capsules(np.empty((B, m, d)), np.empty((B, m, d)), np.empty((B, m)))
+        for b in range(B):
+            self.row(p[b], float(times[b]), bounds, out.a[b], out.e[b], out.rad[b])
+        return out
 
     def moves(self) -> bool:
-        """Whether the capsules depend on t (else the engine computes them once per episode)."""
-        return False
+        """Whether the capsules depend on t (else the engine computes them once per episode): a type with a
+        compiled ``row`` moves."""
+        return self.row is not None
 
     def state_vector(self, p: Array, t: Array, bounds: Array) -> Array:
-        """What the global state carries of these obstacles at times t (B,), (B, k); none for static ones
-        (the scenario's ``param_vector`` has them)."""
-        return np.zeros((p.shape[0], 0))
+        """What the global state carries of these obstacles at times t (B,), (B, k): a moving type's capsules
+        (start, axis, radius of each); none for static ones (the scenario's ``episode_params`` have them)."""
+        if self.row is None:
+            return np.zeros((p.shape[0], 0))
+        c = self.capsules(p, t, bounds)
+        return np.concatenate([c.a, c.e, c.rad[..., None]], axis=-1).reshape(p.shape[0], -1)
 
     def state_bounds(self, m: int, d: int, bounds: Array) -> tuple[Array, Array]:
         """(low, high) of :meth:`state_vector` for m obstacles, each (k,)."""
-        return np.zeros(0), np.zeros(0)
+        if self.row is None:
+            return np.zeros(0), np.zeros(0)
+        ext = bounds[1] - bounds[0]
+        lo = np.concatenate([bounds[0], -ext, [0.0]])
+        hi = np.concatenate([bounds[1], ext, [float(np.min(ext)) / 2]])
+        return np.tile(lo, m), np.tile(hi, m)
 
     def decode(self, vec: Array, t: Array, d: int) -> Array | None:
         """Parameters (B, m, width) equivalent at times t (B,) to a :meth:`state_vector` (B, k) read back, or None
@@ -190,12 +213,10 @@ class MovingCircle(Obstacle):
         hi = np.concatenate([bounds[1], v, [float(np.min(bounds[1] - bounds[0])) / 2]])
         return np.tile(lo, m), np.tile(hi, m)
 
-    def moves(self) -> bool:
-        return True
-
     row: ClassVar[Any] = staticmethod(bounce_row)
 
     def capsules(self, p: Array, t: Array, bounds: Array) -> Capsules:
+        # the row's batched loop compiled (the global state reads it every step, at B in the thousands)
         B, M, w = p.shape
         d = (w - 1) // 2
         out = Capsules(np.empty((B, M, d)), np.empty((B, M, d)), np.empty((B, M)))

@@ -24,7 +24,7 @@ from .kernel import FLAG_AT_GOAL, FLAG_COLLISION, FLAG_SUCCESS
 Array = NDArray[np.float64]
 Bools = NDArray[np.bool_]
 
-__all__ = ["DEFAULT_WEIGHTS", "REWARD_TERMS", "ROUTE_TERMS", "TERMS", "RewardTerm", "reward_table", "reward_term"]
+__all__ = ["DEFAULT_WEIGHTS", "REWARD_TERMS", "TERMS", "RewardTerm", "reward_table", "reward_term"]
 
 
 @dataclass(frozen=True)
@@ -172,8 +172,6 @@ def _tolerance(b: int, out: Array, w: float, dt: float, flags: Bools) -> None:  
 
 #: Names of the registered terms, in order.
 REWARD_TERMS: tuple[str, ...] = tuple(TERMS)
-#: The terms that read the route lengths of the scenario's ``route_row`` (``route0``, ``route1``).
-ROUTE_TERMS: tuple[str, ...] = ("approach", "route_progress")
 #: Default weights of the registered terms.
 DEFAULT_WEIGHTS: dict[str, float] = {t.name: t.weight for t in TERMS.values()}
 

@@ -6,7 +6,8 @@ hooks of :class:`Scenario`: ``_init`` reads its own keyword arguments (unknown o
 ``build`` give the episode's random draws in stream order (:class:`Draw`) and the draw-free, batched map from
 them to the per-episode arrays (obstacles under their types' keys), from which the base class makes
 ``reset(rng, B)`` and ``reset_each(rngs)`` (the vectorised env's auto-reset); ``reference`` and ``goal_vector``
-(moving goals); ``param_vector`` and ``decode_params`` (the task in the global state). Three compiled rows
+(moving goals); ``episode_params`` (the task in the global state: :class:`EpisodeParam`, from which
+``param_vector``, ``decode_params``, ``param_low`` and ``param_high`` follow). Three compiled rows
 (:mod:`~formation_env.env.kernel`) run inside the step: ``pose_row`` (a moving goal's pose), ``route_row`` (the
 ``approach`` potential's route) and ``task_row`` (the ``task`` observation block). Success at a sample: every
 agent within ``goal_tol`` of its goal and the formation error below ``formation_tol``, for ``hold_steps``
@@ -36,6 +37,7 @@ from ..obstacles import Obstacle
 __all__ = [
     "Draw",
     "DrawPlan",
+    "EpisodeParam",
     "Scenario",
     "affine_batch",
     "rotation_2d",
@@ -186,24 +188,40 @@ class Scenario:
         """What ``pose_row`` reads of each episode's moving goal, (B, w); none for a static goal."""
         return np.zeros((next(iter(params.values())).shape[0], 0))
 
+    def episode_params(self) -> list[EpisodeParam]:
+        """The episode's parameters the global state carries (and a planner reads back), in order, each with its
+        shape per episode and bounds; none by default. :meth:`param_vector`, :meth:`decode_params`,
+        :attr:`param_low` and :attr:`param_high` follow from them."""
+        return []
+
+    @functools.cached_property
+    def _episode_params(self) -> list[EpisodeParam]:
+        return self.episode_params()
+
     def param_vector(self, params: dict[str, Array]) -> Array:
-        """Scenario parameters for the global state, shape (B, k) (k = len(param_low))."""
-        return np.zeros((next(iter(params.values())).shape[0], 0))
+        """Scenario parameters for the global state, shape (B, k) (k = len(param_low)): the
+        :meth:`episode_params`, each flattened, side by side."""
+        B = next(iter(params.values())).shape[0]
+        parts = [np.asarray(params[p.name], dtype=np.float64).reshape(B, p.size) for p in self._episode_params]
+        return np.concatenate(parts, axis=1) if parts else np.zeros((B, 0))
 
     @property
     def param_low(self) -> Array:
         """Lower bounds of ``param_vector``, shape (k,)."""
-        return np.zeros(0)
+        return np.concatenate([p.bound(0) for p in self._episode_params] + [np.zeros(0)])
 
     @property
     def param_high(self) -> Array:
         """Upper bounds of ``param_vector``, shape (k,)."""
-        return np.zeros(0)
+        return np.concatenate([p.bound(1) for p in self._episode_params] + [np.zeros(0)])
 
     def decode_params(self, pvec: Array) -> dict[str, Array]:
-        """The per-episode parameters a planner needs, from ``param_vector`` values (B, k) read back out of the
-        global state (the inverse of :meth:`param_vector` where it is one); none by default."""
-        return {}
+        """The :meth:`episode_params` from ``param_vector`` values (B, k) read back out of the global state."""
+        out, at = {}, 0
+        for p in self._episode_params:
+            out[p.name] = pvec[:, at : at + p.size].reshape(pvec.shape[0], *p.shape)
+            at += p.size
+        return out
 
     def task_feature_bounds(self) -> tuple[Array, Array]:
         """(low, high) of the ``task_row`` entries, each (k,)."""
@@ -329,6 +347,25 @@ def check_range(name: str, value: Any, lo: float = -math.inf, hi: float = math.i
     if a < lo or b > hi:
         raise FormationError(f"{name} must lie in [{lo}, {hi}], got ({a}, {b})")
     return a, b
+
+
+class EpisodeParam(NamedTuple):
+    """One parameter of an episode that the global state carries: ``params[name]`` of shape (B, *shape), each
+    entry in [low, high] (numbers or arrays broadcast to ``shape``)."""
+
+    name: str
+    shape: tuple[int, ...] = ()
+    low: Any = 0.0
+    high: Any = 0.0
+
+    @property
+    def size(self) -> int:
+        """Entries per episode."""
+        return int(np.prod(self.shape, dtype=np.int64))
+
+    def bound(self, which: int) -> Array:
+        """The low (0) or high (1) bounds, flattened (size,)."""
+        return np.broadcast_to(np.asarray((self.low, self.high)[which], dtype=np.float64), self.shape).reshape(-1)
 
 
 class Draw(NamedTuple):

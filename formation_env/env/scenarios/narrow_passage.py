@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from .._numba import jit
 from ..obstacles import Segment
-from ._base import Array, Draw, Scenario, check_range, rotation_2d
+from ._base import Array, Draw, EpisodeParam, Scenario, check_range, rotation_2d
 
 __all__ = ["ROUTE_MARGIN", "NarrowPassage"]
 
@@ -137,19 +137,8 @@ class NarrowPassage(Scenario):
         }
         return params, (rotation_2d(raw["angle0"]), b0)
 
-    def param_vector(self, params: dict[str, Array]) -> Array:
-        return np.stack([params["wall_x"], params["gap_center"], params["gap_width"]], -1)
-
-    def decode_params(self, pvec: Array) -> dict[str, Array]:
-        return {"wall_x": pvec[:, 0], "gap_center": pvec[:, 1], "gap_width": pvec[:, 2]}
-
-    @property
-    def param_low(self) -> Array:
-        return np.array([self.wall_x[0], self.gap_center[0], self.gap_width[0]])
-
-    @property
-    def param_high(self) -> Array:
-        return np.array([self.wall_x[1], self.gap_center[1], self.gap_width[1]])
+    def episode_params(self) -> list[EpisodeParam]:
+        return [EpisodeParam(nm, (), *getattr(self, nm)) for nm in ("wall_x", "gap_center", "gap_width")]
 
     task_row = staticmethod(task_row)
     route_row = staticmethod(route_row)

@@ -21,7 +21,7 @@ import numpy as np
 from formation_env.core.errors import FormationError
 
 from ..obstacles import Circle
-from ._base import Array, Draw, Scenario, check_range, rotation_2d, rotation_3d
+from ._base import Array, Draw, EpisodeParam, Scenario, check_range, rotation_2d, rotation_3d
 
 __all__ = ["ObstacleField"]
 
@@ -80,18 +80,8 @@ class ObstacleField(Scenario):
         }
         return params, (self._rotation(raw["angle0"]), b0)
 
-    def param_vector(self, params: dict[str, Array]) -> Array:
-        return params["circles"].reshape(params["circles"].shape[0], -1)
-
-    def decode_params(self, pvec: Array) -> dict[str, Array]:
-        return {"circles": pvec.reshape(pvec.shape[0], -1, self.d + 1)}
-
-    @property
-    def param_low(self) -> Array:
-        lo = [self.obstacle_x[0]] + [self.obstacle_y[0]] * (self.d - 1) + [self.obstacle_radius[0]]
-        return np.tile(lo, self.n_obstacles).astype(np.float64)
-
-    @property
-    def param_high(self) -> Array:
-        hi = [self.obstacle_x[1]] + [self.obstacle_y[1]] * (self.d - 1) + [self.obstacle_radius[1]]
-        return np.tile(hi, self.n_obstacles).astype(np.float64)
+    def episode_params(self) -> list[EpisodeParam]:
+        d = self.d
+        low = [self.obstacle_x[0]] + [self.obstacle_y[0]] * (d - 1) + [self.obstacle_radius[0]]
+        high = [self.obstacle_x[1]] + [self.obstacle_y[1]] * (d - 1) + [self.obstacle_radius[1]]
+        return [EpisodeParam("circles", (self.n_obstacles, d + 1), low, high)]

@@ -177,3 +177,19 @@ def test_render_gives_a_frame_per_env():
     frames = venv.render()
     assert isinstance(frames, tuple) and len(frames) == 2 and frames[0].ndim == 3 and frames[0].dtype == np.uint8
     venv.close()
+
+
+def test_a_refused_construction_leaves_nothing_to_close():
+    """An env whose arguments are refused before its batch exists is closed when collected without an error."""
+    import gc
+    import sys
+
+    seen: list[Any] = []
+    hook, sys.unraisablehook = sys.unraisablehook, seen.append
+    try:
+        with pytest.raises(FormationError, match="autoreset_mode"):
+            gym.make_vec("formation_env/Hold-v0", 2, autoreset_mode="sometimes")
+        gc.collect()
+    finally:
+        sys.unraisablehook = hook
+    assert [str(u.exc_value) for u in seen] == []

@@ -475,5 +475,7 @@ class GymnasiumFormationVecEnv(gymnasium.vector.VectorEnv):
         return tuple(frames[s // self.venv._per_env] for s in range(self.num_envs))  # type: ignore[misc]
 
     def close_extras(self, **kwargs: Any) -> None:
-        """Close the batch's renderer."""
-        self.venv.close()
+        """Close the batch's renderer (nothing to close when the construction was refused before the batch)."""
+        venv = self.__dict__.get("venv")
+        if venv is not None:
+            venv.close()

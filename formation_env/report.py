@@ -131,32 +131,30 @@ def plot_network_regions(regions: dict[str, Any], out: Path) -> tuple[Path, Path
     lam_max = levin_may_bound(0) / regions["levin_may"][0]
     lm = [2 * np.sin(np.pi / (2 * (2 * x + 1))) / lam_max for x in fine]
     ax.plot(fine, lm, "k--", lw=1, label="Levin-May 2 sin(pi / (2(2d+1))) / (g lambda_max)")
-    ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
-    ax.set_xlabel("delay d (samples)")
-    ax.set_ylabel("largest stable T (s)")
-    ax.set_title("paper example, stationary law: stable below each curve")
-    ax.set_ylim(0, 1.6)
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(paths[0], dpi=110)
-    plt.close(fig)
+    _save_region(fig, ax, "delay d (samples)", "largest stable T (s)", 1.6, paths[0])
     p = np.array(regions["losses"])
     fig, ax = plt.subplots(figsize=(6.4, 4.4))
     for model, c in (("hold", "tab:blue"), ("drop", "tab:red")):
         ax.plot(p, regions[f"loss_{model}"], "o-", color=c, ms=4, label=f'loss_model="{model}" (mean square, exact)')
     ax.fill_between(p, 0, np.minimum(regions["loss_hold"], regions["loss_drop"]), color="0.5", alpha=0.12)
+    _save_region(fig, ax, "loss probability p per link and sample", "largest mean-square stable T (s)", 1.7, paths[1])
+    return paths
+
+
+def _save_region(fig: Any, ax: Any, xlabel: str, ylabel: str, top: float, path: Path) -> None:
+    """Label a stable-region figure of the paper example (T from 0 to ``top`` s, T = 1 dotted), save and close it."""
+    import matplotlib.pyplot as plt
+
     ax.axhline(1.0, color="0.5", lw=0.8, ls=":")
-    ax.set_xlabel("loss probability p per link and sample")
-    ax.set_ylabel("largest mean-square stable T (s)")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
     ax.set_title("paper example, stationary law: stable below each curve")
-    ax.set_ylim(0, 1.7)
+    ax.set_ylim(0, top)
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(paths[1], dpi=110)
+    fig.savefig(path, dpi=110)
     plt.close(fig)
-    return paths
 
 
 def _fmt_range(kind_rng: tuple[str, Any]) -> str:

@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from components import BarsAndDiscs, SpinningBars, bar_capsules
-from oracle import capsule_distance, oracle_step, route_lengths
-from test_env_engine import _compare
+from oracle import capsule_distance, route_lengths
+from test_env_engine import run_against_oracle
 
 from formation_env.env.engine import Engine
 from formation_env.env.kernel import jit
@@ -40,17 +40,7 @@ def registries(monkeypatch):
 def _run_against_oracle(eng: Engine, steps: int = 20, B: int = 3, seed: int = 1) -> None:
     """The engine against the numpy oracle. (The oracle marches rays in 1 mm steps and counts a thin wall within
     half a step as hit: seed 0 has a ray that passes 0.16 mm beside a bar's end, a hit for it, a miss exactly.)"""
-    rng = np.random.default_rng(seed)
-    s = eng.reset(rng, B)
-    for _ in range(steps):
-        a = rng.uniform(-1.0, 1.0, (B, eng.n_l, eng.p))
-        new, obs, rew, term, trunc, info = eng.step(s, a)
-        ref, obs_r, rew_r, term_r, trunc_r, info_r = oracle_step(eng, s, a)
-        _compare(new, ref, obs, obs_r, rew, rew_r, (term, trunc), (term_r, trunc_r), info, info_r)
-        done = np.flatnonzero(term | trunc)
-        s = new
-        if done.size:
-            s = Engine.replace_rows(s, done, eng.reset_each([np.random.default_rng(int(b) + 7) for b in done]))
+    run_against_oracle(eng, steps, B, seed)
 
 
 def test_a_rotating_bar_matches_the_oracle(registries):

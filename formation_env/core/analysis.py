@@ -398,8 +398,7 @@ def stability_report(
             "x_l(k+1) = A_d x_l(k) (u_l = 0); leaders held still or steered leave a tracking error (use 'dynamic')"
         )
     stable = rho < 1.0
-    decay = -math.log(rho) / dt if 0 < rho < 1 else (math.inf if rho == 0 else 0.0)
-    steps = (math.log(1e-6) / math.log(rho) if 0 < rho < 1 else 1.0) if stable else math.inf
+    decay, steps = _decay(rho, dt)
     return StabilityReport(
         law=law,
         dt=float(dt),
@@ -643,8 +642,7 @@ def network_report(
             dt_range = min(windows, key=lambda w: abs(math.log(math.sqrt(w[0] * w[1]) / dt)))
     else:
         notes.append("under jitter the periods are given, so no range of T is reported")
-    decay = -math.log(rho) / dt if 0 < rho < 1 else (math.inf if rho == 0 else 0.0)
-    steps = (math.log(1e-6) / math.log(rho) if 0 < rho < 1 else 1.0) if rho < 1 else math.inf
+    decay, steps = _decay(rho, dt)
     eps = getattr(the_law, "eps", None) if law == "linear" else None
     return StabilityReport(
         law=law,
@@ -673,6 +671,14 @@ def network_report(
         steady_error=steady,
         ultimate_bound=ultimate,
     )
+
+
+def _decay(rho: float, dt: float) -> tuple[float, float]:
+    """The decay rate (1/s) and the samples to shrink an error 1e6-fold at per-sample factor ``rho`` (inf, 0 and
+    inf, 1 at the edges; 0 and inf when unstable)."""
+    decay = -math.log(rho) / dt if 0 < rho < 1 else (math.inf if rho == 0 else 0.0)
+    steps = (math.log(1e-6) / math.log(rho) if 0 < rho < 1 else 1.0) if rho < 1 else math.inf
+    return decay, steps
 
 
 def _replace(net: Network, **changes: Any) -> Network:

@@ -313,12 +313,27 @@ def simulate(
             LawAssumptionWarning,
             stacklevel=2,
         )
+    return _result(part, dyn, states, inputs, the_law, dt, return_result)
+
+
+def _result(
+    part: Partition,
+    dyn: LinearDynamics,
+    states: Array,
+    inputs: Array,
+    the_law: FollowerLaw,
+    dt: float,
+    return_result: bool,
+    **network: Any,
+) -> Array | SimResult:
+    """The positions of a run's ``states`` (steps + 1, n, state), or its :class:`SimResult` with the followers'
+    targets and errors (``network``: the result's network fields)."""
     positions = dyn.position(states)
     if not return_result:
         return positions
     tgt_states = part.targets(states[:, part.leaders])
     with np.errstate(over="ignore", invalid="ignore"):  # a diverging run was already warned about
-        err = np.linalg.norm((states[:, part.followers] - tgt_states).reshape(steps + 1, -1), axis=1)
+        err = np.linalg.norm((states[:, part.followers] - tgt_states).reshape(len(states), -1), axis=1)
     return SimResult(
         positions=positions,
         states=states,
@@ -327,6 +342,7 @@ def simulate(
         errors=err,
         law=the_law,
         dt=float(dt),
+        **network,
     )
 
 
@@ -400,21 +416,5 @@ def _simulate_network(
         states[k + 1] = st.x
         inputs[k, part.leaders] = u_l
         inputs[k, part.followers] = u_f
-    positions = dyn.position(states)
-    if not return_result:
-        return positions
-    tgt_states = part.targets(states[:, part.leaders])
-    with np.errstate(over="ignore", invalid="ignore"):
-        err = np.linalg.norm((states[:, part.followers] - tgt_states).reshape(steps + 1, -1), axis=1)
-    return SimResult(
-        positions=positions,
-        states=states,
-        inputs=inputs,
-        targets=dyn.position(tgt_states),
-        errors=err,
-        law=the_law,
-        dt=float(dt),
-        network=net,
-        periods=periods,
-        delivered=delivered,
-    )
+    return _result(part, dyn, states, inputs, the_law, dt, return_result, network=net, periods=periods,
+                   delivered=delivered)  # fmt: skip

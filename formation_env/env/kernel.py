@@ -431,20 +431,26 @@ def affine_into(r: Array, pose: Array, out: Array) -> None:  # pragma: no cover
 
 
 @jit
+def goal_max(b: int, pos: Array, goal: Array) -> float:  # pragma: no cover
+    """Env b's largest distance (m) of an agent to its goal position: pos, goal (B, n, d)."""
+    far = 0.0
+    for i in range(pos.shape[1]):
+        dd = 0.0
+        for c in range(pos.shape[2]):
+            dd += (goal[b, i, c] - pos[b, i, c]) ** 2
+        far = max(far, math.sqrt(dd))
+    return far
+
+
+@jit
 def judge_row(  # pragma: no cover
     b: int, pos: Array, goal: Array, leaders: Ints, gdist: Array, gmax: Array, r: Array, pinv: Array, theta: Array,
     bfit: Array, err: Array, flags: Bools, goal_tol: float, formation_tol: float, streak0: Ints, streak: Ints,
     hold_steps: int, end_on_success: bool, k: Ints, max_cycles: int
 ) -> None:  # fmt: skip
     """Env b's goal distances, affine fit, success streak and the episode's end."""
-    n, d = pos.shape[1], pos.shape[2]
-    far = 0.0
-    for i in range(n):
-        dd = 0.0
-        for c in range(d):
-            dd += (goal[b, i, c] - pos[b, i, c]) ** 2
-        far = max(far, math.sqrt(dd))
-    gmax[b] = far
+    far = gmax[b] = goal_max(b, pos, goal)
+    d = pos.shape[2]
     for i in range(leaders.shape[0]):
         dd = 0.0
         for c in range(d):
@@ -467,14 +473,7 @@ def verdict_row(  # pragma: no cover
 ) -> None:  # fmt: skip
     """The judgement of a state without a step (``observe``): the largest goal distance and the flags the step
     that made the state set, from its own streak (which it does not advance)."""
-    n, d = pos.shape[1], pos.shape[2]
-    far = 0.0
-    for i in range(n):
-        dd = 0.0
-        for c in range(d):
-            dd += (goal[b, i, c] - pos[b, i, c]) ** 2
-        far = max(far, math.sqrt(dd))
-    gmax[b] = far
+    far = gmax[b] = goal_max(b, pos, goal)
     f = flags[b]
     f[FLAG_AT_GOAL] = far < goal_tol and err[b] < formation_tol and not f[FLAG_COLLISION]
     f[FLAG_SUCCESS] = streak[b] >= hold_steps

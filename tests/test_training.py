@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -395,3 +396,34 @@ def test_a_run_uses_its_threads_and_records_them_the_machine_and_its_command(tmp
     assert saved["machine"]["cores"] == usable_cores()
     assert train("ppo", "shared", "hold", out=tmp_path / "all", smoke=True)["threads"] == usable_cores()
     assert torch.get_num_threads() == usable_cores()
+
+
+def test_adaptive_learning_rate_follows_each_updates_kl(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """``kl_<initial>_<target>``: divided by 1.5 after an update whose KL exceeds twice the target, multiplied by 1.5
+    below half of it, within [1e-5, 1e-2]; a run feeds it SB3's ``approx_kl`` after every update."""
+    from train.leaders import AdaptiveLR, main, schedules
+
+    lr = schedules({"learning_rate": "kl_1e-3_0.01"})["learning_rate"]
+    assert isinstance(lr, AdaptiveLR) and lr(1.0) == lr(0.0) == 1e-3
+    lr.adapt(0.03)
+    assert lr(0.5) == pytest.approx(1e-3 / 1.5)
+    lr.adapt(0.01)  # within [target / 2, 2 target]: unchanged
+    assert lr(0.5) == pytest.approx(1e-3 / 1.5)
+    lr.adapt(0.001)
+    assert lr(0.5) == pytest.approx(1e-3)
+    for _ in range(40):
+        lr.adapt(1.0)
+    assert lr(0.5) == AdaptiveLR.low
+    for bad in ("kl_1e-3", "kl_0_0.01", "kl_1e-3_-1"):
+        with pytest.raises(ValueError, match=r"learning_rate|both must be > 0"):
+            schedules({"learning_rate": bad})
+    # a target far below any update's KL: the rate falls by 1.5 after each update but the last
+    argv = ["--mode", "commander", "--scenario", "hold", "--n-envs", "2", "--timesteps", "256", "--eval-episodes", "0",
+            "--algo-kwargs", '{"n_steps": 32, "batch_size": 64, "n_epochs": 2, "learning_rate": "kl_1e-3_1e-9"}',
+            "--out", str(tmp_path)]  # fmt: skip
+    assert main(argv) == 0
+    assert json.loads(capsys.readouterr().out)["name"] == "ppo_commander"  # no evaluation asked, none printed
+    from stable_baselines3 import PPO
+
+    model = PPO.load(tmp_path / "hold_commander.zip")
+    assert model.learning_rate(0.0) == pytest.approx(1e-3 / 1.5**3)  # 4 updates, adapted after the first 3

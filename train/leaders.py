@@ -155,7 +155,50 @@ class LinearSchedule:
         return min(1.0, remaining / (1.0 - self.start)) * self.initial
 
 
+class AdaptiveLR:
+    """A learning rate adapted to the policy's change at every update (``"kl_<initial>_<target>"`` in a recipe), as
+    rsl_rl's adaptive schedule: after an update whose mean KL divergence between the old and new policy (SB3's
+    ``approx_kl``, last epoch) exceeds 2 x ``target`` the rate is divided by 1.5, below ``target`` / 2 multiplied by
+    1.5, kept in [``low``, ``high``]. :class:`KLAdaptation` applies it; SB3 calls it like any schedule."""
+
+    low: float = 1e-5
+    high: float = 1e-2
+
+    def __init__(self, initial: float, target: float) -> None:
+        if not (initial > 0 and target > 0):
+            raise ValueError(f"kl_<initial>_<target>: both must be > 0, got {initial}, {target}")
+        self.value = float(initial)
+        self.target = float(target)
+
+    def __call__(self, remaining: float) -> float:
+        return self.value
+
+    def adapt(self, kl: float) -> None:
+        """Move the rate after an update whose mean KL divergence was ``kl``."""
+        if kl > 2.0 * self.target:
+            self.value = max(self.value / 1.5, self.low)
+        elif kl < 0.5 * self.target:
+            self.value = min(self.value * 1.5, self.high)
+
+
+class KLAdaptation(BaseCallback):
+    """Feeds each update's ``train/approx_kl`` to the model's :class:`AdaptiveLR` before the next rollout."""
+
+    def __init__(self, schedule: AdaptiveLR) -> None:
+        super().__init__()
+        self.schedule = schedule
+
+    def _on_rollout_start(self) -> None:
+        kl = self.model.logger.name_to_value.get("train/approx_kl")
+        if kl is not None:
+            self.schedule.adapt(float(kl))
+
+    def _on_step(self) -> bool:
+        return True
+
+
 _SCHEDULE = re.compile(r"lin_(?P<initial>[^_]+)(_from_(?P<start>[^_]+))?")
+_ADAPTIVE = re.compile(r"kl_(?P<initial>[^_]+)_(?P<target>[^_]+)")
 
 
 def schedules(hp: dict[str, Any]) -> dict[str, Any]:
@@ -163,7 +206,10 @@ def schedules(hp: dict[str, Any]) -> dict[str, Any]:
     as a :class:`LinearSchedule`; another string raises ValueError naming the key."""
     out = dict(hp)
     for key, val in hp.items():
-        if isinstance(val, str):
+        adaptive = _ADAPTIVE.fullmatch(val) if isinstance(val, str) and key == "learning_rate" else None
+        if adaptive is not None:
+            out[key] = AdaptiveLR(float(adaptive["initial"]), float(adaptive["target"]))
+        elif isinstance(val, str):
             match = _SCHEDULE.fullmatch(val)
             try:
                 if match is None:
@@ -479,6 +525,8 @@ def train(
     if progress_bar is None:
         progress_bar = sys.stdout.isatty() and not smoke
     callbacks: list[BaseCallback] = [curve, ckpt, *extra_callbacks]
+    if isinstance(model.learning_rate, AdaptiveLR):
+        callbacks.append(KLAdaptation(model.learning_rate))
     if curriculum is not None:
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:
@@ -622,7 +670,7 @@ def main(argv: Sequence[str] | None = None, prog: str = "python -m train.leaders
     """Parse the flags (``formation-env train`` runs this too, with its own ``prog``), train, and print the run's
     name, wall time and evaluation as JSON."""
     config = train(**parse_run(argv, prog))
-    print(json.dumps({k: config[k] for k in ("name", "wall_time_s", "eval")}, indent=2))
+    print(json.dumps({k: config[k] for k in ("name", "wall_time_s", "eval") if k in config}, indent=2))
     return 0
 
 

@@ -272,3 +272,51 @@ def test_tracking_scenarios_show_the_tracking_error_on_the_board() -> None:
     assert "from the first sample whose error is at most a tenth" in md  # the definition of "formed"
     table = summary_table(board)
     assert "| maneuver | 1.00 / 0.020 m | 1.00 / 0.040 m |" in table and "| hold | 1.00 / 0.1 s |" in table
+
+
+def _fake_board(network: str, success: float) -> dict:
+    """A board of two scenarios (one timed, one tracking) with the planner and one learned entry."""
+
+    def row(s: float) -> dict:
+        m = {"success_rate": s, "collision_rate": 1.0 - s, "time_to_goal": 5.0, "tracking_err": 0.02}
+        return {"kind": "learned", "metrics": m, "per_seed": [m]}
+
+    rows = {"random": {"kind": "random", "metrics": None}, "analytic": row(1.0), "ppo_commander": row(success)}
+    return {"scenarios": {"hold": rows, "maneuver": rows}, "episodes": 2, "seed": 0, "network": network}
+
+
+def test_robustness_section_and_table_are_written_beside_the_board(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``--network``'s page and README table: one column per condition, success / collisions (/ time), entries with
+    no result under any condition left out; the project's standard board keeps the section and vice versa."""
+    from train.leaderboard import ROBUSTNESS_HEADING, robustness_markdown, robustness_table, write_project
+
+    boards = {"ideal": _fake_board("ideal", 0.9), "loss20": _fake_board("loss20", 0.5)}
+    page = robustness_markdown(boards, "formation-env leaderboard --network all --project")
+    assert page.startswith(ROBUSTNESS_HEADING) and "| entry | ideal | loss20 |" in page
+    assert "| ppo_commander | 0.90 / 0.10 / 5 s | 0.50 / 0.50 / 5 s |" in page  # timed: the time to goal
+    assert "| ppo_commander | 0.90 / 0.10 / 0.02 m | 0.50 / 0.50 / 0.02 m |" in page  # tracking: the error
+    assert "| random |" not in page
+    table = robustness_table(boards)
+    assert table.splitlines()[0] == "| scenario | entry | ideal | loss20 |"
+    assert "| hold | analytic | 1.00 / 0.00 / 5 s | 1.00 / 0.00 / 5 s |" in table
+    (tmp_path / "docs").mkdir()
+    (tmp_path / "docs" / "leaderboard.md").write_text("# Leaderboard\n\nold board\n")
+    readme = "# x\n\n| scenario | random |\n|---|---|\n| hold | 0 |\n\n" + table.replace("0.50", "0.10") + "\n\nend\n"
+    (tmp_path / "README.md").write_text(readme)
+    write_project({"robustness": boards}, page, tmp_path)
+    doc = (tmp_path / "docs" / "leaderboard.md").read_text()
+    assert doc.startswith("# Leaderboard\n\nold board\n\n" + ROBUSTNESS_HEADING)
+    text = (tmp_path / "README.md").read_text()
+    assert table in text and "| hold | 0 |" in text and text.endswith("\n\nend\n")
+    board = _fake_board("ideal", 0.9)
+    board["scenarios"] = {"hold": board["scenarios"]["hold"]}
+    new_page = "# Leaderboard\n\nnew board\n\n## Summary\n\n| scenario | random |\n|---|---|\n| hold | 1 |\n"
+    from train import leaderboard as lb
+
+    monkeypatch.setattr(lb, "summary_table", lambda b: "| scenario | random |\n|---|---|\n| hold | 1 |")
+    write_project(board, new_page, tmp_path)
+    doc = (tmp_path / "docs" / "leaderboard.md").read_text()
+    assert doc.startswith(new_page) and doc.count(ROBUSTNESS_HEADING) == 1 and "| ppo_commander | 0.90" in doc
+    assert "| hold | 1 |" in (tmp_path / "README.md").read_text()

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from agents.bounds import time_lower_bound_seeds
-from agents.policy import POLICY_DIR
+from agents.policy import POLICY_DIR, load_policy
 from formation_env._progress import add_progress_argument, progress_bar
 from formation_env.env.scenarios import REGISTRY
 
@@ -43,8 +43,9 @@ from .evaluate import _finite, make_engine, paired_difference
 from .evaluate import evaluate as evaluate_suite
 
 __all__ = [
-    "ENTRIES", "LEARNED", "PROJECT_ROOT", "SHOWN", "SHOWN_TRACKING", "find_policies", "leaderboard", "main", "markdown",
-    "shown", "write_project",
+    "ENTRIES", "LEARNED", "NETWORKS", "NETWORK_LAW", "NETWORK_TRAINED", "PROJECT_ROOT", "SHOWN", "SHOWN_TRACKING",
+    "find_policies", "leaderboard", "main", "markdown", "robustness_markdown", "robustness_table", "shown",
+    "write_project",
 ]  # fmt: skip
 
 #: Learned entries: name -> (algo, mode).
@@ -64,6 +65,25 @@ SHOWN_TRACKING = ("success_rate", "collision_rate", "tracking_err", "mean_format
 PRETRAINED = POLICY_DIR
 #: The source checkout whose ``docs/leaderboard.md`` and ``README.md`` table ``--project`` rewrites.
 PROJECT_ROOT = Path(__file__).resolve().parents[1]
+
+
+#: Named conditions of the robustness view (``--network NAME``): the fields of a :class:`formation_env.core.Network`
+#: (None: a perfect network). Periods are in s (the env's T is 0.1 s), the quantiser's step in m.
+NETWORKS: dict[str, dict[str, Any] | None] = {
+    "ideal": None,
+    "delay2": {"delay": 2},
+    "loss20": {"loss": 0.2},
+    "loss50": {"loss": 0.5},
+    "jitter": {"jitter": [0.05, 0.15]},
+    "quantise": {"quantise": ["uniform", 0.05]},
+}
+#: The followers' law under every condition of the robustness view: the env runs a network on the distributed stress
+#: feedback only (``dynamic`` is a centralised solve), so ``ideal`` runs it too and the conditions differ by the
+#: network alone.
+NETWORK_LAW = "linear"
+#: Entries of the robustness view only: commanders trained under a network condition, ``<scenario>_<entry>_seed<k>.zip``
+#: (entry -> (algo, mode)).
+NETWORK_TRAINED: dict[str, tuple[str, str]] = {"ppo_commander_loss20": ("ppo", "commander")}
 
 
 def shown(scenario: str) -> tuple[str, ...]:
@@ -94,18 +114,29 @@ def leaderboard(
     policies: str | Path = PRETRAINED,
     scenarios: Sequence[str] | None = None,
     progress: bool | None = False,
+    network: str | None = None,
 ) -> dict[str, Any]:
     """Evaluate every entry on every scenario's suite; the JSON contract ``{"scenarios": {...}}`` plus
-    ``"episodes"``, ``"seed"``, ``"policies"``. ``progress``: a bar of the suites evaluated, on stderr (None: when
-    stderr is a terminal)."""
+    ``"episodes"``, ``"seed"``, ``"policies"`` and ``"network"``. ``progress``: a bar of the suites evaluated, on
+    stderr (None: when stderr is a terminal). ``network``: a condition of :data:`NETWORKS`: every entry's followers
+    run :data:`NETWORK_LAW` over that network (each learned policy with its own training arguments besides), and the
+    entries of :data:`NETWORK_TRAINED` join the board."""
+    if network is not None and network not in NETWORKS:
+        raise ValueError(f"network must be one of {list(NETWORKS)}, got {network!r}")
     out: dict[str, Any] = {}
     scenarios = list(scenarios or sorted(REGISTRY))
-    total = sum(2 + sum(len(find_policies(policies, sc, e)) for e in LEARNED) for sc in scenarios)
+    learned = dict(LEARNED) if network is None else {**LEARNED, **NETWORK_TRAINED}
+    total = sum(2 + sum(len(find_policies(policies, sc, e)) for e in learned) for sc in scenarios)
     bar = progress_bar(total, "leaderboard", progress, "suite")
 
     def evaluate(spec: str, sc: str) -> dict[str, Any]:
         bar.set_description_str(f"{sc}: {Path(spec).stem}")
-        res = evaluate_suite(spec, sc, episodes, seed, gif=False, generalisation=False)
+        if network is None:
+            res = evaluate_suite(spec, sc, episodes, seed, gif=False, generalisation=False)
+        else:
+            policy = load_policy(spec, scenario=sc)
+            kw = {**policy.env_kwargs, "follower_law": NETWORK_LAW, "network": NETWORKS[network]}
+            res = evaluate_suite(policy, sc, episodes, seed, env_kwargs=kw, gif=False, generalisation=False)
         bar.update()
         return res
 
@@ -123,7 +154,7 @@ def leaderboard(
                 "ci95": res["ci95"],
                 "worst": res["worst"],
             }
-        for entry in LEARNED:
+        for entry in learned:
             paths = find_policies(policies, sc, entry)
             if not paths:
                 rows[entry] = {"kind": "learned", "metrics": None, "note": "no shipped policy"}
@@ -146,7 +177,8 @@ def leaderboard(
             }
         out[sc] = rows
     bar.close()
-    return {"scenarios": out, "episodes": int(episodes), "seed": int(seed), "policies": str(policies)}
+    return {"scenarios": out, "episodes": int(episodes), "seed": int(seed), "policies": str(policies),
+            "network": network}  # fmt: skip
 
 
 def _any_finite(rows: list[dict[str, float]], key: str) -> bool:
@@ -223,6 +255,82 @@ def summary_table(board: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
+ROBUSTNESS_HEADING = "## Over an imperfect network"
+#: Entries of the README's robustness table.
+ROBUST_SHOWN = ("analytic", "ppo_commander", "ppo_residual", *NETWORK_TRAINED)
+
+
+def _robust_cell(row: dict[str, Any] | None, timed: bool) -> str:
+    m = None if row is None else row.get("metrics")
+    if m is None:
+        return "-"
+    last = m["time_to_goal"] if timed else m["tracking_err"]
+    unit = " s" if timed else " m"
+    tail = f" / {last:.3g}{unit}" if np.isfinite(last) else ""
+    return f"{m['success_rate']:.2f} / {m['collision_rate']:.2f}{tail}"
+
+
+def robustness_markdown(boards: dict[str, dict[str, Any]], command: str) -> str:
+    """The robustness section of docs/leaderboard.md: per scenario, every entry (rows) under every condition of
+    ``boards`` (condition -> :func:`leaderboard` board, columns): success / collisions / time to goal (s), or the
+    tracking error (m) on a tracking scenario."""
+    names = list(boards)
+    first = boards[names[0]]
+    nets = "; ".join(f"`{n}`: " + ("a perfect network" if NETWORKS[n] is None else
+                                   ", ".join(f"{k}={v}" for k, v in NETWORKS[n].items())) for n in names)  # fmt: skip
+    lines = [
+        ROBUSTNESS_HEADING,
+        "",
+        f"Made by `{command}` on {time.strftime('%Y-%m-%d')} ({platform.machine()}, {platform.python_version()}). "
+        f"{first['episodes']} episodes per scenario, seeds {first['seed']}..{first['seed'] + first['episodes'] - 1}, "
+        f"the same under every condition. Every condition, `ideal` included, runs the followers' distributed "
+        f'stress feedback (`follower_law="{NETWORK_LAW}"`; the board above runs the centralised `dynamic` law, '
+        "which a per-link network does not define), so the columns differ by the network alone. Conditions "
+        f"(`formation_env.core.Network`, docs/networks.md): {nets}. Cells: success / collisions / time to goal (s) "
+        "over solved episodes, or the tracking error (m) on a tracking scenario; learned entries are the mean over "
+        "their training seeds. `ppo_commander_loss20`: a commander trained from scratch under `loss20` "
+        "(docs/learning.md).",
+        "",
+    ]
+    for sc in first["scenarios"]:
+        timed = REGISTRY[sc].terminate_on_success
+        rows = boards[names[0]]["scenarios"][sc]
+        entries = [e for e in rows if any(b["scenarios"][sc][e].get("metrics") is not None for b in boards.values())]
+        lines += [f"### {sc}", "", "| entry | " + " | ".join(names) + " |", "|---" * (len(names) + 1) + "|"]
+        for e in entries:
+            lines.append(f"| {e} | " + " | ".join(_robust_cell(boards[n]["scenarios"][sc].get(e), timed)
+                                                   for n in names) + " |")  # fmt: skip
+        lines.append("")
+    return "\n".join(lines)
+
+
+def robustness_table(boards: dict[str, dict[str, Any]]) -> str:
+    """The README's robustness table: success / collisions (/ time to goal, s) of the planner and the learned
+    commanders on every scenario under every condition."""
+    names = list(boards)
+    first = boards[names[0]]
+    lines = ["| scenario | entry | " + " | ".join(names) + " |", "|---" * (len(names) + 2) + "|"]
+    for sc in first["scenarios"]:
+        timed = REGISTRY[sc].terminate_on_success
+        for e in ROBUST_SHOWN:
+            cells = [_robust_cell(boards[n]["scenarios"][sc].get(e), timed) for n in names]
+            if all(c == "-" for c in cells):
+                continue
+            lines.append(f"| {sc} | {e} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _replace_table(lines: list[str], table: list[str], path: Path) -> list[str]:
+    """``lines`` with the Markdown table whose header row is ``table[0]`` replaced by ``table``."""
+    start = next((i for i, line in enumerate(lines) if line.rstrip("\n") == table[0]), None)
+    if start is None:
+        raise ValueError(f"{path} has no table to replace (no line {table[0]!r})")
+    end = start
+    while end < len(lines) and lines[end].startswith("|"):
+        end += 1
+    return lines[:start] + [line + "\n" for line in table] + lines[end:]
+
+
 def write_project(board: dict[str, Any], page: str, root: str | Path | None = None) -> list[Path]:
     """The project's own leaderboard: ``page`` as ``docs/leaderboard.md`` and :func:`summary_table` in place of the
     results table of ``README.md`` (the lines from its header row to the first line not a table row). Returns the
@@ -239,18 +347,19 @@ def write_project(board: dict[str, Any], page: str, root: str | Path | None = No
             f"--project rewrites the source checkout's docs/leaderboard.md and README.md, and {root} is not one "
             "(no README.md or docs/ in it): run from a clone, or write elsewhere with --out"
         )
-    table = summary_table(board).splitlines()
-    lines = readme.read_text().splitlines(keepends=True)
-    start = next((i for i, line in enumerate(lines) if line.rstrip("\n") == table[0]), None)
-    if start is None:
-        raise ValueError(f"{readme} has no results table to replace (no line {table[0]!r})")
-    end = start
-    while end < len(lines) and lines[end].startswith("|"):
-        end += 1
-    lines[start:end] = [line + "\n" for line in table]
-    (docs / "leaderboard.md").write_text(page)
+    robust = board.get("robustness")  # condition -> board: the robustness section and table instead
+    table = (summary_table(board) if robust is None else robustness_table(robust)).splitlines()
+    lines = _replace_table(readme.read_text().splitlines(keepends=True), table, readme)
+    doc = docs / "leaderboard.md"
+    old = doc.read_text() if doc.is_file() else ""
+    head, _, tail = old.partition(ROBUSTNESS_HEADING)
+    if robust is None:  # the standard board; the robustness section stays
+        text = page.rstrip("\n") + ("\n\n" + ROBUSTNESS_HEADING + tail if tail else "\n")
+    else:
+        text = head.rstrip("\n") + "\n\n" + page.rstrip("\n") + "\n"
+    doc.write_text(text)
     readme.write_text("".join(lines))
-    return [docs / "leaderboard.md", readme]
+    return [doc, readme]
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -273,6 +382,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="write the project's own docs/leaderboard.md and README table (every scenario; a source checkout)",
     )
+    p.add_argument(
+        "--network", nargs="+", default=None, metavar="NAME", choices=[*NETWORKS, "all"],
+        help=f"the robustness view: every entry under these network conditions ({', '.join(NETWORKS)}, or all); "
+        "writes leaderboard_network.md (--project: the section of docs/leaderboard.md and the README's table)",
+    )  # fmt: skip
     add_progress_argument(p)
 
 
@@ -286,21 +400,31 @@ def run_cli(args: argparse.Namespace) -> int:
         raise FileNotFoundError(
             f"--policies must be a folder of learned policies, got {args.policies} (no such folder)"
         )
-    board = leaderboard(args.episodes, args.seed, args.policies, args.scenarios, progress=args.progress)
-    cmd = f"formation-env leaderboard --episodes {args.episodes} --seed {args.seed}" + (
-        " --project" if args.project else ""
-    )
-    page = markdown(board, cmd) + "\n## Summary\n\n" + summary_table(board) + "\n"
+    cmd = f"formation-env leaderboard --episodes {args.episodes} --seed {args.seed}"
+    if args.network:
+        names = list(NETWORKS) if "all" in args.network else list(dict.fromkeys(args.network))
+        if args.project and names != list(NETWORKS):
+            raise ValueError("--project writes the whole robustness table: pass --network all")
+        cmd += " --network " + " ".join(args.network) + (" --project" if args.project else "")
+        boards = {n: leaderboard(args.episodes, args.seed, args.policies, args.scenarios, args.progress, network=n)
+                  for n in names}  # fmt: skip
+        board: dict[str, Any] = {"robustness": boards}
+        page, table, name = robustness_markdown(boards, cmd) + "\n", robustness_table(boards), "leaderboard_network.md"
+    else:
+        cmd += " --project" if args.project else ""
+        board = leaderboard(args.episodes, args.seed, args.policies, args.scenarios, progress=args.progress)
+        page = markdown(board, cmd) + "\n## Summary\n\n" + summary_table(board) + "\n"
+        table, name = summary_table(board), "leaderboard.md"
     if args.project:
         written = write_project(board, page)
     else:
         out.mkdir(parents=True, exist_ok=True)
-        written = [out / "leaderboard.md"]
+        written = [out / name]
         written[0].write_text(page)
     if args.json:
         print(json.dumps(_finite(board)))
     else:
-        print(summary_table(board))
+        print(table)
         print("written to " + ", ".join(str(w) for w in written))
     return 0
 

@@ -414,9 +414,16 @@ def test_adaptive_learning_rate_follows_each_updates_kl(tmp_path: Path, capsys: 
     for _ in range(40):
         lr.adapt(1.0)
     assert lr(0.5) == AdaptiveLR.low
-    for bad in ("kl_1e-3", "kl_0_0.01", "kl_1e-3_-1"):
-        with pytest.raises(ValueError, match=r"learning_rate|both must be > 0"):
+    for bad in ("kl_1e-3", "kl_0_0.01", "kl_1e-3_-1", "kl_1e-3_0.01_from_0", "kl_1e-3_0.01_from_1.5"):
+        with pytest.raises(ValueError, match=r"learning_rate|both must be > 0|f must be in"):
             schedules({"learning_rate": bad})
+    late = schedules({"learning_rate": "kl_1e-3_0.01_from_0.75"})["learning_rate"]
+    assert late(0.5) == 1e-3  # adapted over the first 75 % of training
+    late.adapt(0.001)
+    assert late(0.3) == pytest.approx(1.5e-3)
+    assert late(0.125) == pytest.approx(0.75e-3) and late(0.0) == 0.0  # then linear to 0 from the rate reached
+    late.adapt(1.0)  # no adaptation while annealing
+    assert late(0.125) == pytest.approx(0.75e-3)
     # a target far below any update's KL: the rate falls by 1.5 after each update but the last
     argv = ["--mode", "commander", "--scenario", "hold", "--n-envs", "2", "--timesteps", "256", "--eval-episodes", "0",
             "--algo-kwargs", '{"n_steps": 32, "batch_size": 64, "n_epochs": 2, "learning_rate": "kl_1e-3_1e-9"}',

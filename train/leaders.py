@@ -159,22 +159,33 @@ class AdaptiveLR:
     """A learning rate adapted to the policy's change at every update (``"kl_<initial>_<target>"`` in a recipe), as
     rsl_rl's adaptive schedule: after an update whose mean KL divergence between the old and new policy (SB3's
     ``approx_kl``, last epoch) exceeds 2 x ``target`` the rate is divided by 1.5, below ``target`` / 2 multiplied by
-    1.5, kept in [``low``, ``high``]. :class:`KLAdaptation` applies it; SB3 calls it like any schedule."""
+    1.5, kept in [``low``, ``high``]. :class:`KLAdaptation` applies it; SB3 calls it like any schedule.
+
+    ``"kl_<initial>_<target>_from_<f>"``: adapted over the fraction ``f`` of training, then shrinking linearly to 0
+    from the rate reached (no more adaptation), so that the last updates settle the policy."""
 
     low: float = 1e-5
     high: float = 1e-2
 
-    def __init__(self, initial: float, target: float) -> None:
+    def __init__(self, initial: float, target: float, anneal_from: float = 1.0) -> None:
         if not (initial > 0 and target > 0):
             raise ValueError(f"kl_<initial>_<target>: both must be > 0, got {initial}, {target}")
+        if not 0.0 < anneal_from <= 1.0:
+            raise ValueError(f"kl_<initial>_<target>_from_<f>: f must be in (0, 1], got {anneal_from}")
         self.value = float(initial)
         self.target = float(target)
+        self.anneal_from = float(anneal_from)
+        self._remaining = 1.0
 
     def __call__(self, remaining: float) -> float:
-        return self.value
+        self._remaining = remaining
+        left = 1.0 - self.anneal_from  # the fraction of training that anneals
+        return self.value if remaining >= left else self.value * remaining / left
 
     def adapt(self, kl: float) -> None:
-        """Move the rate after an update whose mean KL divergence was ``kl``."""
+        """Move the rate after an update whose mean KL divergence was ``kl`` (not once annealing has begun)."""
+        if self._remaining < 1.0 - self.anneal_from:
+            return
         if kl > 2.0 * self.target:
             self.value = max(self.value / 1.5, self.low)
         elif kl < 0.5 * self.target:
@@ -198,7 +209,7 @@ class KLAdaptation(BaseCallback):
 
 
 _SCHEDULE = re.compile(r"lin_(?P<initial>[^_]+)(_from_(?P<start>[^_]+))?")
-_ADAPTIVE = re.compile(r"kl_(?P<initial>[^_]+)_(?P<target>[^_]+)")
+_ADAPTIVE = re.compile(r"kl_(?P<initial>[^_]+)_(?P<target>[^_]+)(_from_(?P<start>[^_]+))?")
 
 
 def schedules(hp: dict[str, Any]) -> dict[str, Any]:
@@ -208,7 +219,7 @@ def schedules(hp: dict[str, Any]) -> dict[str, Any]:
     for key, val in hp.items():
         adaptive = _ADAPTIVE.fullmatch(val) if isinstance(val, str) and key == "learning_rate" else None
         if adaptive is not None:
-            out[key] = AdaptiveLR(float(adaptive["initial"]), float(adaptive["target"]))
+            out[key] = AdaptiveLR(float(adaptive["initial"]), float(adaptive["target"]), float(adaptive["start"] or 1))
         elif isinstance(val, str):
             match = _SCHEDULE.fullmatch(val)
             try:

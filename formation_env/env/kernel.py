@@ -1,7 +1,8 @@
 """The compiled step: one numba implementation of a step, composed per engine from its components.
 
 A step runs environment by environment (row b) through its *parts* (:data:`PARTS`, in order): ``law`` (the
-followers' law and the dynamics), ``capsules`` (every obstacle at the step's time), ``contacts``, ``goal``,
+followers' law and the dynamics; ``network`` in its place in an engine with a communication network,
+:mod:`~formation_env.env.network`), ``capsules`` (every obstacle at the step's time), ``contacts``, ``goal``,
 ``judge`` (goal distances, affine fit, success, the episode's end) and, when a component reads it, ``route``;
 then the engine's reward terms fill the rewards and its observation blocks the observations. Each part declares
 the arrays it writes; every array of the step is declared once, in :data:`ARRAYS` (name, shape, unit, the part
@@ -42,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._numba import jit, source_stamp
+from .network import clip_actions, kinematics, network_row
 from .obstacles import path_clearance, point_clearance
 
 __all__ = [
@@ -97,6 +99,22 @@ class Consts(NamedTuple):
     n_nearest: int
     k_nearest: int
     end_on_success: bool
+    followers: Ints
+    net_recv: Ints
+    net_send: Ints
+    net_w: Array
+    net_row: Ints
+    net_gain: Array
+    zoh_a: Array
+    zoh_b: Array
+    dyn_a: Array
+    dyn_b: Array
+    zoh_kind: int
+    loss: float
+    hold: bool
+    quant: int
+    quant_step: float
+    jitter: Array
 
 
 class Episode(NamedTuple):
@@ -148,6 +166,7 @@ class ArraySpec(NamedTuple):
 
 # fmt: off
 _E = "np.empty"
+_LAW = "law, network"
 #: Every array of the step, in the order of the step's arguments (the ``state`` ones) and outputs (``out``).
 ARRAYS: tuple[ArraySpec, ...] = (
     # the state before the step (the step's inputs; in observe, the state itself)
@@ -163,18 +182,41 @@ ARRAYS: tuple[ArraySpec, ...] = (
               state="goal_dist"),
     ArraySpec("streak0", "(B,)", "samples", "state", "consecutive samples at the goal", observe="state",
               state="streak"),
+    ArraySpec("sent0", "(B, d_n, n, q)", "state", "state", "network: what every agent sent at k - 1, ..., k - d "
+              "(neighbours delay; else (0, 0, 0, 0))", observe="state", state="net_sent"),
+    ArraySpec("corr0", "(B, d_i, n_f, q)", "state", "state", "network: the corrections c(k - 1), ..., c(k - d) "
+              "(input delay; else (0, 0, 0, 0))", observe="state", state="net_corr"),
+    ArraySpec("held0", "(B, m_h, q)", "state", "state", "network: the value each link j -> i holds (hold model; "
+              "else (0, 0, 0))", observe="state", state="net_held"),
+    ArraySpec("rng0", "(B, 4)", "1", "state", "network: each copy's PCG64 generator state (uint64 words; else "
+              "(0, 4))", observe="state", state="net_rng"),
+    ArraySpec("lost0", "(B,)", "samples", "state", "network: link samples lost since the reset (else (0,))",
+              observe="state", state="net_lost"),
     # law and dynamics
-    ArraySpec("act", "(B, n_l, p)", "1", "law", "the leaders' actions, clipped to [-1, 1]", observe="zeros"),
-    ArraySpec("effort", "(B, n_l)", "input^2", "law", "u_i . u_i, the squared input of each leader (u = u_max a)",
+    ArraySpec("act", "(B, n_l, p)", "1", _LAW, "the leaders' actions, clipped to [-1, 1]", observe="zeros"),
+    ArraySpec("effort", "(B, n_l)", "input^2", _LAW, "u_i . u_i, the squared input of each leader (u = u_max a)",
               "np.zeros((B, n_l))", observe="", out=True),
-    ArraySpec("x", "(B, n, q)", "state", "law", "agent states after the step",
-              "np.empty(x0.shape) if law.shape[0] else x_in", observe="state", out=True),
-    ArraySpec("mem", "(B, n_f, p)", "input", "law", "follower-law memory after the step",
-              "np.empty(mem0.shape) if law.shape[0] else mem_in", observe="state", out=True),
-    ArraySpec("pos", "(B, n, d)", "m", "law", "positions after the step", f"{_E}(pos0.shape)", "state", True),
-    ArraySpec("vel", "(B, n, d)", "m/s", "law", "velocities (C A x, or the change of position over T)",
+    ArraySpec("x", "(B, n, q)", "state", _LAW, "agent states after the step",
+              "x_in if x_in.size else np.empty(x0.shape)", observe="state", out=True),
+    ArraySpec("mem", "(B, n_f, p)", "input", _LAW, "follower-law memory after the step",
+              "mem_in if x_in.size else np.empty(mem0.shape)", observe="state", out=True),
+    ArraySpec("pos", "(B, n, d)", "m", _LAW, "positions after the step", f"{_E}(pos0.shape)", "state", True),
+    ArraySpec("vel", "(B, n, d)", "m/s", _LAW, "velocities (C A x, or the change of position over the period)",
               f"{_E}(pos0.shape)", "state", True),
-    ArraySpec("k", "(B,)", "samples", "law", "samples taken after the step", f"{_E}(B, np.int64)", "state", True),
+    ArraySpec("k", "(B,)", "samples", _LAW, "samples taken after the step", f"{_E}(B, np.int64)", "state", True),
+    # the network (instead of the law's map, when the engine has one)
+    ArraySpec("sent", "(B, d_n, n, q)", "state", "network", "what was sent at k, ..., k - d + 1",
+              f"{_E}(sent0.shape)", observe="", out=True),
+    ArraySpec("corr", "(B, d_i, n_f, q)", "state", "network", "the corrections c(k), ..., c(k - d + 1)",
+              f"{_E}(corr0.shape)", observe="", out=True),
+    ArraySpec("held", "(B, m_h, q)", "state", "network", "the value each link holds after the step",
+              f"{_E}(held0.shape)", observe="", out=True),
+    ArraySpec("rng", "(B, 4)", "1", "network", "each copy's generator state after the step's draws",
+              f"{_E}(rng0.shape, np.uint64)", observe="", out=True),
+    ArraySpec("lost", "(B,)", "samples", "network", "link samples lost since the reset, after the step",
+              f"{_E}(lost0.shape, np.int64)", observe="", out=True),
+    ArraySpec("period", "(B,)", "s", "network", "the sample's period T_k (drawn under jitter, else T)",
+              f"{_E}(lost0.shape[0])", observe="", out=True),
     # obstacles
     ArraySpec("cur_a", "(B, m, d)", "m", "capsules", "every capsule's axis start at t = k T (static, then each "
               "moving type's)", f"{_E}((B, m, d))"),
@@ -240,6 +282,23 @@ ARRAYS: tuple[ArraySpec, ...] = (
     ArraySpec("n_nearest", "scalar", "1", "engine", "nearest obstacles sensed in 3D"),
     ArraySpec("k_nearest", "scalar", "1", "engine", "agents in the nearest_agents block"),
     ArraySpec("end_on_success", "scalar", "bool", "engine", "success ends the episode"),
+    ArraySpec("followers", "(n_f,)", "index", "engine", "network: the followers' agent indices (else (0,))"),
+    ArraySpec("net_recv", "(m_l,)", "index", "engine", "network: each directed link j -> i's receiver i "
+              "(core.network.network_links order)"),
+    ArraySpec("net_send", "(m_l,)", "index", "engine", "network: each link's sender j (leaders send too)"),
+    ArraySpec("net_w", "(m_l,)", "1/m^2", "engine", "network: each link's weight Omega_ij"),
+    ArraySpec("net_row", "(m_l,)", "index", "engine", "network: each link's receiver's row in followers"),
+    ArraySpec("net_gain", "(p, q)", "1", "engine", "network: the law's gain G (u_i = G c_i): eps K"),
+    ArraySpec("zoh_a", "(q, q)", "1", "engine", "network: A_d at the nominal T"),
+    ArraySpec("zoh_b", "(q, p)", "1", "engine", "network: B_d at the nominal T"),
+    ArraySpec("dyn_a", "(q, q)", "1/s", "engine", "network: the continuous A (the ZOH at a drawn period)"),
+    ArraySpec("dyn_b", "(q, p)", "1", "engine", "network: the continuous B"),
+    ArraySpec("zoh_kind", "scalar", "1", "engine", "network: the ZOH at the period: 0 nominal, 1 (I, T B), 2 expm"),
+    ArraySpec("loss", "scalar", "1", "engine", "network: probability p that a link loses a sample"),
+    ArraySpec("hold", "scalar", "bool", "engine", "network: a lost sample keeps the last value received"),
+    ArraySpec("quant", "scalar", "1", "engine", "network: quantiser of what is sent: 0 none, 1 uniform, 2 log"),
+    ArraySpec("quant_step", "scalar", "state", "engine", "network: the uniform step delta, or the log density rho"),
+    ArraySpec("jitter", "(2,) or (0,)", "s", "engine", "network: (T_min, T_max) of the drawn periods, or none"),
     # the episodes' arrays
     ArraySpec("pvec", "(B, k)", "scenario's", "reset", "the scenario's episode parameters (its param_vector)"),
     ArraySpec("cap_a", "(B, m_s, d)", "m", "reset", "static capsules' axis starts (made at the reset)"),
@@ -326,13 +385,7 @@ def move_row(  # pragma: no cover
 ) -> None:  # fmt: skip
     """The law and the dynamics of env b: clipped actions, [x', mem'] = [x, u_max a, mem] M, positions C x',
     velocities (C A x' or the change of position over T), the sample count."""
-    n_l, p = act.shape[1], act.shape[2]
-    for i in range(n_l):
-        e = 0.0
-        for j in range(p):
-            act[b, i, j] = min(max(act[b, i, j], -1.0), 1.0)
-            e += (u_max * act[b, i, j]) ** 2
-        effort[b, i] = e
+    clip_actions(b, act, effort, u_max)
     if law.shape[0]:
         z = np.concatenate((x0[b].ravel(), u_max * act[b].ravel(), mem0[b].ravel()))
         out = np.zeros(law.shape[1])
@@ -343,21 +396,7 @@ def move_row(  # pragma: no cover
         nx = x0.shape[1] * x0.shape[2]
         x[b] = out[:nx].reshape(x.shape[1:])
         mem[b] = out[nx:].reshape(mem.shape[1:])
-    n, q, d = x.shape[1], x.shape[2], pos.shape[2]
-    for i in range(n):
-        for c in range(d):
-            acc = 0.0
-            for j in range(q):
-                acc += x[b, i, j] * c_t[j, c]
-            pos[b, i, c] = acc
-            if ca_t.shape[0]:
-                acc = 0.0
-                for j in range(q):
-                    acc += x[b, i, j] * ca_t[j, c]
-                vel[b, i, c] = acc
-            else:
-                vel[b, i, c] = (acc - pos0[b, i, c]) / dt
-    k[b] = k0[b] + 1
+    kinematics(b, x, c_t, ca_t, pos0, pos, vel, dt, k0, k)
 
 
 @jit
@@ -532,6 +571,9 @@ _JUDGED = ("flags:at_goal", "flags:success", "flags:terminated", "flags:truncate
 PARTS: tuple[Part, ...] = (
     Part("law", ("act", "effort", "x", "mem", "pos", "vel", "k"), None,
          "clipped actions, [x', mem'] = [x, u_max a, mem] M, positions, velocities, the sample count", (move_row,)),
+    Part("network", ("act", "effort", "x", "mem", "pos", "vel", "k", "sent", "corr", "held", "rng", "lost", "period"),
+         None, "instead of law, with a network: draws, what is sent and received, u_f = G c, every agent's ZOH over "
+         "the period (env.network)", (network_row,)),
     Part("capsules", ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
          ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
          "the static capsules, then each moving type's row at t and at t - T"),
@@ -547,6 +589,13 @@ PARTS: tuple[Part, ...] = (
 )  # fmt: skip
 PART_NAMES = tuple(p.name for p in PARTS)
 _OPTIONAL = ("route",)  # parts that run only when a component reads what they write
+#: The part that takes the place of another in an engine with a network (and is left out without one).
+_INSTEAD = {"network": "law"}
+
+
+def _left_out(network: bool) -> frozenset[str]:
+    """The parts an engine does not compose: ``network`` without a network, else ``law``."""
+    return frozenset(_INSTEAD.values()) if network else frozenset(_INSTEAD)
 
 
 def _target_array(target: str) -> str:
@@ -677,10 +726,12 @@ class _Composer:
         raise KeyError(part)  # pragma: no cover
 
 
-def _writers(observe: bool) -> dict[str, list[str]]:
-    """array name -> the parts that write it (in step order) in the step or in observe."""
+def _writers(observe: bool, left_out: frozenset[str] = frozenset()) -> dict[str, list[str]]:
+    """array name -> the parts that write it (in step order) in the step or in observe (but ``left_out``)."""
     out: dict[str, list[str]] = {}
     for part in PARTS:
+        if part.name in left_out:
+            continue
         targets = part.observe if observe else (part.writes if part.name != "fit" else None)
         for target in targets or ():
             out.setdefault(_target_array(target), [])
@@ -689,10 +740,12 @@ def _writers(observe: bool) -> dict[str, list[str]]:
     return out
 
 
-def _schedule(wanted: set[str], observe: bool, composer: _Composer, always: Sequence[str]) -> list[str]:
+def _schedule(
+    wanted: set[str], observe: bool, composer: _Composer, always: Sequence[str], left_out: frozenset[str] = frozenset()
+) -> list[str]:
     """The parts to run, in step order: ``always`` and the writers of the ``wanted`` arrays, with the parts they
-    read in turn."""
-    writers = _writers(observe)
+    read in turn (never the ``left_out`` ones)."""
+    writers = _writers(observe, left_out)
     chosen = set(always)
     todo = [w for nm in wanted for w in writers.get(nm, [])]
     while todo:
@@ -768,6 +821,7 @@ def compose(
     route: Any = None,
     moving: Sequence[Any] = (),
     pose: Any = None,
+    network: bool = False,
 ) -> Any:
     """The compiled module of an engine's components: ``step``, ``step_parallel`` and ``observe``.
 
@@ -776,7 +830,9 @@ def compose(
     when a component reads ``route0`` or ``route1``; None: :func:`straight_route`); ``moving``: the rows of the
     scenario's moving obstacle types ``row(p (M, w), t, bounds, a (M, d), e (M, d), rad (M,))``, in capsule order;
     ``pose``: the scenario's ``pose_row(goal_p (w,), t, out (d, d + 1))`` of a moving goal, or None (a static
-    goal). Each component's parameters are named after the step's arrays (:func:`call`).
+    goal). Each component's parameters are named after the step's arrays (:func:`call`). ``network``: the
+    ``network`` part (:mod:`~formation_env.env.network`) takes the place of ``law``; without it the step has no
+    network part at all.
 
     Raises TypeError naming the component when it names no array of the step, or when a block reads an array that
     ``observe`` does not have (:data:`ARRAYS`: ``observe``). The source is written to a cache folder
@@ -805,8 +861,9 @@ def compose(
             )
     obs_lines = [*block_lines, call(finish_obs)]
     wanted = _reads(term_lines + block_lines)
-    always = [p for p in PART_NAMES if p not in _OPTIONAL and p != "fit"]
-    step_parts = _schedule(wanted, False, composer, always)
+    left_out = _left_out(network)
+    always = [p for p in PART_NAMES if p not in _OPTIONAL and p != "fit" and p not in left_out]
+    step_parts = _schedule(wanted, False, composer, always, left_out)
     observe_parts = _schedule(_reads(block_lines) | {"theta"}, True, composer, ["fit"])
     _check_writers(step_parts, False, "step")
     _check_writers(observe_parts, True, "observe")

@@ -143,7 +143,10 @@ def oracle_step(eng: Engine, state: EngineState, actions):
     else:
         vel = (pos - state.pos) / period[:, None, None]
     k = state.k + 1
-    t = k * eng.dt
+    t0 = eng.time(state)
+    t = t0 + period if state.net_time is not None else k * eng.dt
+    if state.net_time is not None:
+        net["net_time"] = t
     B, n, d = pos.shape
     sc = eng.scenario
     # goals
@@ -160,10 +163,10 @@ def oracle_step(eng: Engine, state: EngineState, actions):
     pairs = [(i, j) for i in range(n) for j in range(i + 1, n)] if n <= 64 else [tuple(e) for e in eng.fw.edges]
     for i, j in pairs:
         clear = np.minimum(clear, np.linalg.norm(pos[:, i] - pos[:, j], axis=-1) - 2 * eng.agent_radius)
-    caps = eng.capsules(state.params, k)
+    caps = eng.capsules(state.params, k, t)
     if caps.a.shape[1]:
         clear = np.minimum(clear, capsule_distance(pos, caps).min(axis=(1, 2)) - eng.agent_radius)
-        caps0 = eng.capsules(state.params, state.k)
+        caps0 = eng.capsules(state.params, state.k, t0)
         shift = np.abs(caps.a - caps0.a).max(axis=(1, 2), initial=0.0)
         turned = np.any(caps.e != caps0.e, axis=(1, 2)) | np.any(caps.rad != caps0.rad, axis=1)
         ends = np.abs(caps.a + caps.e - caps0.a - caps0.e).max(axis=(1, 2), initial=0.0)

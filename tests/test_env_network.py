@@ -104,8 +104,10 @@ def test_step_matches_the_oracle_under_each_model(name, dynamics, law, scenario)
 
 
 def test_general_linear_dynamics_under_jitter_match_the_oracle():
-    dyn = LinearDynamics(A=np.kron(np.array([[0.0, 1.0], [-0.5, -0.8]]), np.eye(2)),
-                         B=np.kron(np.array([[0.0], [1.0]]), np.eye(2)), C=np.kron(np.array([[1.0, 0.0]]), np.eye(2)))  # fmt: skip
+    """A damped oscillator per axis (A != 0, not an integrator): the ZOH at each drawn period is the compiled expm."""
+    eye = np.eye(2)
+    A, B = np.kron([[0.0, 1.0], [-0.5, -0.8]], eye), np.kron([[0.0], [1.0]], eye)
+    dyn = LinearDynamics(A=A, B=B, C=np.kron([[1.0, 0.0]], eye))
     eng = _engine("hold", dyn, "linear", Network(jitter=(0.05, 0.2), loss=0.1))
     run_against_oracle(eng, 15, 2, seed=4)
 
@@ -181,14 +183,14 @@ def test_vec_env_copies_equal_single_envs_with_a_network():
     venv = FormationVecEnv("moving_obstacles", num_envs=3, mode="shared", **kw)
     venv.seed(21)
     venv.reset()
-    singles = [formation_v0.parallel_env("moving_obstacles", **kw) for _ in range(3)]
+    singles = [formation_v0.parallel_env(scenario="moving_obstacles", **kw) for _ in range(3)]
     for b, env in enumerate(singles):
         env.reset(seed=21 + b)
     nl = venv.n_l
     rng = np.random.default_rng(0)
     for _ in range(40):
         act = rng.uniform(-1, 1, (3 * nl, venv.p))
-        obs, rew, done, infos = venv.step(act)
+        obs, rew, _, infos = venv.step(act)
         for b, env in enumerate(singles):
             o, r, te, tr, inf = env.step({a: act[b * nl + i] for i, a in enumerate(env.possible_agents)})
             agents = env.possible_agents
@@ -224,12 +226,13 @@ def test_bad_networks_are_refused_naming_network(kwargs, error, match):
     with pytest.raises(error, match=match):
         Engine("hold", **kwargs)
     with pytest.raises(error, match=match):
-        formation_v0.parallel_env("hold", **kwargs)
+        formation_v0.parallel_env(scenario="hold", **kwargs)
 
 
 def test_checkers_accept_a_network():
     """The PettingZoo parallel API test on a networked env (the full checker sweep: tests/test_env_api.py)."""
     from pettingzoo.test import parallel_api_test
 
-    make = functools.partial(formation_v0.parallel_env, "hold", follower_law="linear", network=NETWORKS["combination"])
+    net = NETWORKS["combination"]
+    make = functools.partial(formation_v0.parallel_env, scenario="hold", follower_law="linear", network=net)
     parallel_api_test(make(), num_cycles=50)

@@ -33,7 +33,6 @@ from formation_env.core.validation import as_array, check_mapping
 
 from . import config
 from .config import DYNAMICS, FOLLOWER_LAWS, check_combination, offered_combinations, resolve_dynamics
-from .network import NO_NETWORK_CONSTS, NetworkSetup, network_seeds
 from .kernel import (
     FLAG_COLLISION,
     FLAG_OOB,
@@ -47,6 +46,7 @@ from .kernel import (
     compose,
     fit_rows,
 )
+from .network import NO_NETWORK_CONSTS, NetworkSetup, network_seeds
 from .observations import DEFAULT_OBSERVATION, Observer
 from .obstacles import Capsules, ray_directions
 from .rewards import REWARD_TERMS, TERMS
@@ -87,6 +87,7 @@ _PLACEHOLDERS: dict[str, Any] = {
     "net_held": np.zeros((0, 0, 0)),
     "net_rng": np.zeros((0, 4), dtype=np.uint64),
     "net_lost": np.zeros(0, dtype=np.int64),
+    "net_time": np.zeros(0),
 }
 #: The info entries of a step (arrays (B,) from :meth:`Engine.step`), with their units.
 INFO_KEYS: dict[str, str] = {
@@ -225,6 +226,8 @@ class Engine:
         self.law_params = lp
         #: The network's constants and loop (None without a network).
         self._net = NetworkSetup.build(self.network, self.law, dyn, self.dt) if self.network is not None else None
+        #: The env time is the sum of the drawn periods (state ``net_time``), not k T.
+        self._timed = self.network is not None and self.network.jitter is not None
         over = ""
         if self._net is not None:
             from formation_env.core.analysis import network_stability
@@ -384,14 +387,14 @@ class Engine:
         g1 = affine_batch(sc.r, *sc.reference(params, t + self.dt))
         return g0, (g1 - g0) * (1.0 / self.dt)
 
-    def capsules(self, params: dict[str, Array], k: NDArray[np.int64]) -> Capsules:
+    def capsules(self, params: dict[str, Array], k: NDArray[np.int64], t: Array | None = None) -> Capsules:
         """Every obstacle's capsules after k samples (B,): the static ones of the episode and the moving ones
-        at t = k T."""
+        at t = k T (or at the given env times t (B,) s, under jitter: :meth:`time`)."""
         static = Capsules(params["_ca"], params["_ce"], params["_cr"])
         if not self._moving:
             return static
         parts = [static] if static.a.shape[1] else []
-        t = self.dt * k.astype(np.float64)
+        t = self.dt * k.astype(np.float64) if t is None else t
         parts += [ob.capsules(params[ob.key], t, self.bounds) for ob in self._moving]
         return Capsules.join(parts, k.shape[0], self.d)
 
@@ -417,7 +420,7 @@ class Engine:
             terms = [name for name, w in self.reward_weights.items() if w != 0.0]
             moving = [ob.row for ob in self._moving]
             mod = compose(blocks(self.observer), [(t, TERMS[t].row) for t in terms], sc.route_row, moving, sc.pose_row,
-                          network=self._net is not None)  # fmt: skip
+                          network=self._net is not None, timed=self._timed)  # fmt: skip
             so = self.state_observer
             smod = compose(blocks(so), [], sc.route_row, moving, sc.pose_row) if so is not None else None
             self._compiled = (np.array([self.reward_weights[t] for t in terms]), mod, smod)
@@ -535,7 +538,7 @@ class Engine:
         lost = np.zeros(B)
         if self._net is not None:
             net = {"net_sent": out.sent, "net_corr": out.corr, "net_held": out.held, "net_rng": out.rng,
-                   "net_lost": out.lost}  # fmt: skip
+                   "net_lost": out.lost, "net_time": out.time if self._timed else None}  # fmt: skip
             lost = out.lost / np.maximum(out.k * max(self._net.loop.m, 1), 1)
         new = EngineState(out.x, out.pos, out.vel, mem, out.k, out.goal, out.gvel, out.gdist, out.err, out.streak,
                           state.params, **net)  # fmt: skip
@@ -546,7 +549,7 @@ class Engine:
             "formation_error": out.err,
             "min_clearance": out.clear,
             "goal_distance": out.gmax,
-            "time": out.k * self.dt,
+            "time": out.time if self._timed else out.k * self.dt,
             "control_effort": out.effort,
             "lost_fraction": lost,
         }
@@ -569,7 +572,7 @@ class Engine:
             blocks, theta = smod.observe(*self._args(c, state, acts, _NO_STATE, _NO_STATE, _NO_NOISE))
         else:
             theta = self._fit(state.pos)[0] if ctx is None else ctx.theta
-        t = self.dt * state.k.astype(np.float64)
+        t = self.time(state)
         parts = [state.pos.reshape(B, -1), state.vel.reshape(B, -1), state.goal.reshape(B, -1)]
         parts += [state.goal_vel.reshape(B, -1), state.err[:, None], theta.reshape(B, -1), state.params["_pvec"]]
         parts += [ob.state_vector(state.params[ob.key], t, self.bounds) for ob in self.obstacles]
@@ -587,9 +590,13 @@ class Engine:
         out[:, self.followers] = np.einsum("fl,bld->bfd", self.law.part.localisation, state.pos[:, self.leaders])
         return out
 
+    def time(self, state: EngineState) -> Array:
+        """The env time of every copy (B,) s: k T, or under jitter the sum of the drawn periods."""
+        return state.net_time if state.net_time is not None else self.dt * state.k.astype(np.float64)
+
     def frame(self, state: EngineState, b: int = 0, trail: Array | None = None, text: str = "") -> dict[str, Any]:
         """The renderer's frame dict for batch entry ``b`` (keys: ``rendering.FRAME_KEYS``)."""
-        t = float(state.k[b] * self.dt)
+        t = float(self.time(state)[b])
         gd = float(np.max(np.linalg.norm(state.goal[b] - state.pos[b], axis=-1)))
         status = text or f"{self.scenario_name}  t={t:.1f} s  formation error {state.err[b]:.3f} m  goal {gd:.2f} m"
         d = self.d

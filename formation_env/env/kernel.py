@@ -192,6 +192,8 @@ ARRAYS: tuple[ArraySpec, ...] = (
               "(0, 4))", observe="state", state="net_rng"),
     ArraySpec("lost0", "(B,)", "samples", "state", "network: link samples lost since the reset (else (0,))",
               observe="state", state="net_lost"),
+    ArraySpec("time0", "(B,)", "s", "state", "network with jitter: the env time, the sum of the drawn periods (else "
+              "(0,): t = k T)", observe="state", state="net_time"),
     # law and dynamics
     ArraySpec("act", "(B, n_l, p)", "1", _LAW, "the leaders' actions, clipped to [-1, 1]", observe="zeros"),
     ArraySpec("effort", "(B, n_l)", "input^2", _LAW, "u_i . u_i, the squared input of each leader (u = u_max a)",
@@ -217,6 +219,8 @@ ARRAYS: tuple[ArraySpec, ...] = (
               f"{_E}(lost0.shape, np.int64)", observe="", out=True),
     ArraySpec("period", "(B,)", "s", "network", "the sample's period T_k (drawn under jitter, else T)",
               f"{_E}(lost0.shape[0])", observe="", out=True),
+    ArraySpec("time", "(B,)", "s", "network", "under jitter, the env time after the step (else (0,))",
+              f"{_E}(time0.shape)", observe="", out=True),
     # obstacles
     ArraySpec("cur_a", "(B, m, d)", "m", "capsules", "every capsule's axis start at t = k T (static, then each "
               "moving type's)", f"{_E}((B, m, d))"),
@@ -571,9 +575,10 @@ _JUDGED = ("flags:at_goal", "flags:success", "flags:terminated", "flags:truncate
 PARTS: tuple[Part, ...] = (
     Part("law", ("act", "effort", "x", "mem", "pos", "vel", "k"), None,
          "clipped actions, [x', mem'] = [x, u_max a, mem] M, positions, velocities, the sample count", (move_row,)),
-    Part("network", ("act", "effort", "x", "mem", "pos", "vel", "k", "sent", "corr", "held", "rng", "lost", "period"),
-         None, "instead of law, with a network: draws, what is sent and received, u_f = G c, every agent's ZOH over "
-         "the period (env.network)", (network_row,)),
+    Part("network", ("act", "effort", "x", "mem", "pos", "vel", "k", "sent", "corr", "held", "rng", "lost", "period",
+                     "time"), None,
+         "instead of law, with a network: draws, what is sent and received, u_f = G c, every agent's ZOH over the "
+         "period (env.network)", (network_row,)),
     Part("capsules", ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
          ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
          "the static capsules, then each moving type's row at t and at t - T"),
@@ -692,8 +697,14 @@ def _reads(lines: Sequence[str]) -> set[str]:
 class _Composer:
     """The source of one engine's step and observe (see :func:`compose`)."""
 
-    def __init__(self, moving: Sequence[Any], pose: Any, route: Any, alias: Callable[[Any], str]) -> None:
+    def __init__(
+        self, moving: Sequence[Any], pose: Any, route: Any, alias: Callable[[Any], str], timed: bool = False
+    ) -> None:
         self.moving, self.pose, self.route, self.alias = list(moving), pose, route, alias
+        #: The env time of the sample and of the one before: k T, or the sum of the drawn periods (jitter).
+        self.now = "time[b]" if timed else "k[b] * dt"
+        self.before = "time0[b]" if timed else "(k[b] - 1) * dt"
+        self.at_state = "time0[b]" if timed else "k[b] * dt"
 
     def part_lines(self, part: str, observe: bool) -> list[str]:
         decl = PARTS[PART_NAMES.index(part)]
@@ -704,7 +715,8 @@ class _Composer:
             lines = [call(static_capsules)]
             for j, row in enumerate(self.moving):
                 nm, sl = self.alias(row), f"[b, m{j}:m{j + 1}]"
-                for t, pre in (("k[b] * dt", "cur"), ("k[b] * dt" if observe else "(k[b] - 1) * dt", "old")):
+                now = self.at_state if observe else self.now
+                for t, pre in ((now, "cur"), (self.at_state if observe else self.before, "old")):
                     lines.append(f"{nm}(mov_p{j}[b], {t}, bounds, {pre}_a{sl}, {pre}_e{sl}, {pre}_r{sl})")
             return lines
         if part == "goal":
@@ -713,9 +725,9 @@ class _Composer:
             nm = self.alias(self.pose)
             return [
                 "pose = np.empty((d, d + 1))",
-                f"{nm}(goal_p[b], k[b] * dt, pose)",
+                f"{nm}(goal_p[b], {self.now}, pose)",
                 "affine_into(r, pose, goal[b])",
-                f"{nm}(goal_p[b], (k[b] + 1) * dt, pose)",
+                f"{nm}(goal_p[b], {self.now} + dt, pose)",
                 "affine_into(r, pose, gvel[b])",
                 "gvel[b] = (gvel[b] - goal[b]) / dt",
             ]
@@ -822,6 +834,7 @@ def compose(
     moving: Sequence[Any] = (),
     pose: Any = None,
     network: bool = False,
+    timed: bool = False,
 ) -> Any:
     """The compiled module of an engine's components: ``step``, ``step_parallel`` and ``observe``.
 
@@ -832,7 +845,7 @@ def compose(
     ``pose``: the scenario's ``pose_row(goal_p (w,), t, out (d, d + 1))`` of a moving goal, or None (a static
     goal). Each component's parameters are named after the step's arrays (:func:`call`). ``network``: the
     ``network`` part (:mod:`~formation_env.env.network`) takes the place of ``law``; without it the step has no
-    network part at all.
+    network part at all. ``timed``: the env time is the sum of the drawn periods (``time``, jitter), not k T.
 
     Raises TypeError naming the component when it names no array of the step, or when a block reads an array that
     ``observe`` does not have (:data:`ARRAYS`: ``observe``). The source is written to a cache folder
@@ -846,7 +859,7 @@ def compose(
     aliases: dict[int, str] = {}
     for fn in funcs:
         aliases.setdefault(id(fn), re.sub(r"\W", "_", _name(fn)[1]) + f"_fn{len(aliases)}")
-    composer = _Composer(moving, pose, route, lambda fn: aliases[id(fn)])
+    composer = _Composer(moving, pose, route, lambda fn: aliases[id(fn)], timed)
     term_lines = [_component("reward term", nm, fn, {"out": "rew[b]", "w": f"weights[{i}]"}, aliases[id(fn)])
                   for i, (nm, fn) in enumerate(terms)]  # fmt: skip
     block_lines = [_component("observation block", nm, fn, {"out": "buf[b]", "lo": str(lo)}, aliases[id(fn)])

@@ -136,7 +136,10 @@ def _expm(a: Array) -> Array:  # pragma: no cover
         for i in range(k):
             col += abs(a[i, j])
         norm = max(norm, col)
-    s = max(0, int(math.ceil(math.log2(norm / 0.5)))) if norm > 0.5 else 0
+    s = 0
+    while norm > 0.5:
+        norm *= 0.5
+        s += 1
     m = a / (2.0**s)
     out = np.eye(k)
     term = np.eye(k)
@@ -221,7 +224,7 @@ def network_row(  # pragma: no cover
     net_recv: Any, net_send: Any, net_w: Array, net_row: Any, net_gain: Array, zoh_a: Array, zoh_b: Array,
     dyn_a: Array, dyn_b: Array, zoh_kind: int, loss: float, hold: bool, quant: int, quant_step: float,
     jitter: Array, sent0: Array, sent: Array, corr0: Array, corr: Array, held0: Array, held: Array, rng0: Any,
-    rng: Any, lost0: Any, lost: Any, period: Array
+    rng: Any, lost0: Any, lost: Any, period: Array, time0: Array, time: Array
 ) -> None:  # fmt: skip
     """Env b's sample over the network (:class:`~formation_env.core.network.NetworkLoop`'s ``step``):
 
@@ -231,7 +234,7 @@ def network_row(  # pragma: no cover
     3. link e = j -> i: hold: xhat_e = s_j if theta_e else the held copy; drop: w_e = theta_e Omega_ij;
        c_i = sum_e w_e (xhat_e - x_i); input delay: c(k - d) is used (``corr``); u_i = G c_i (followers);
     4. every agent: x' = A_d(T) x + B_d(T) u (leaders u = u_max a), positions, velocities, the count; the lost
-       link samples are added to ``lost``.
+       link samples are added to ``lost``; under jitter the env time ``time`` advances by T.
     """
     clip_actions(b, act, effort, u_max)
     n, q = x0.shape[1], x0.shape[2]
@@ -243,6 +246,8 @@ def network_row(  # pragma: no cover
     if jitter.shape[0]:
         T = jitter[0] + (jitter[1] - jitter[0]) * pcg64_double(st)
     period[b] = T
+    if time0.shape[0]:  # jitter: the env time advances by the drawn period
+        time[b] = time0[b] + T
     s = np.empty((n, q))
     for i in range(n):
         for j in range(q):
@@ -380,6 +385,7 @@ class NetworkSetup(NamedTuple):
             "net_held": np.ascontiguousarray(np.stack([st.held for st in sts])),
             "net_rng": np.stack([pcg64_state(int(s)) for s in seeds]),
             "net_lost": np.zeros(x.shape[0], dtype=np.int64),
+            "net_time": np.zeros(x.shape[0]) if self.network.jitter is not None else None,
         }
 
 

@@ -36,6 +36,7 @@ class EngineState(NamedTuple):
             in ``core.network.network_links`` order.
         net_rng: each copy's PCG64 generator state, shape (B, 4) uint64 (``env.network``).
         net_lost: link samples lost since the reset, shape (B,) int.
+        net_time: under jitter, the env time (s), the sum of the drawn periods, shape (B,) (else None: t = k T).
     """
 
     x: Array
@@ -54,6 +55,7 @@ class EngineState(NamedTuple):
     net_held: Array | None = None
     net_rng: NDArray[np.uint64] | None = None
     net_lost: NDArray[np.int64] | None = None
+    net_time: Array | None = None
 
     @property
     def batch_size(self) -> int:

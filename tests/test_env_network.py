@@ -207,6 +207,7 @@ def test_without_a_network_the_step_has_no_network_part():
     nominal, networked = Engine("hold"), Engine("hold", follower_law="linear", network={"loss": 0.1})
     src = [open(eng._compose()[1].__file__).read() for eng in (nominal, networked)]
     assert "network_row" not in src[0] and "move_row" in src[0]
+    assert not any(name in src[0] for name in ("sent0", "rng0", "nc.", "lost"))  # nor its arguments or outputs
     assert "network_row" in src[1] and "move_row" not in src[1]
     assert kernel._left_out(False) == {"network"} and kernel._left_out(True) == {"law"}
 

@@ -39,14 +39,16 @@ from .kernel import (
     FLAG_SUCCESS,
     FLAG_TERMINATED,
     FLAG_TRUNCATED,
-    STATE_INPUTS,
+    NOMINAL_OUTPUTS,
     Consts,
     Episode,
+    NetConsts,
     Outputs,
     compose,
     fit_rows,
+    step_inputs,
 )
-from .network import NO_NETWORK_CONSTS, NetworkSetup, network_seeds
+from .network import NetworkSetup, network_seeds
 from .observations import DEFAULT_OBSERVATION, Observer
 from .obstacles import Capsules, ray_directions
 from .rewards import REWARD_TERMS, TERMS
@@ -78,8 +80,12 @@ _NO_STATE = np.zeros((0, 0, 0))
 _NO_NOISE = np.zeros((0, 0, 0))
 #: The fields of ``EngineState`` but ``params``.
 _FIELDS = tuple(f for f in EngineState._fields if f != "params")
-#: The state's fields the compiled step takes, in its argument order (``kernel.STATE_INPUTS``).
-_STATE_ARGS = operator.attrgetter(*(spec.state for spec in STATE_INPUTS))
+#: The state's fields the compiled step takes, in its argument order (``kernel.step_inputs``), without and with a
+#: network.
+_STATE_SPECS = {net: step_inputs(net) for net in (False, True)}
+_STATE_ARGS = {net: operator.attrgetter(*(spec.state for spec in specs)) for net, specs in _STATE_SPECS.items()}
+#: The outputs a step without a network does not return.
+_NO_NET_OUT = (None,) * (len(Outputs._fields) - len(NOMINAL_OUTPUTS))
 #: What the compiled step gets for a state field that is None (no law memory, no network): empty arrays.
 _PLACEHOLDERS: dict[str, Any] = {
     "net_sent": np.zeros((0, 0, 0, 0)),
@@ -281,6 +287,7 @@ class Engine:
         self._build_state_bounds()
         self._compiled: tuple[Array, Any, Any] | None = None
         self._consts: Consts | None = None
+        self._net_consts: NetConsts | None = None
         self._compose()  # every component's parameters are checked now, not at the first step
 
     # ------------------------------------------------------------------ construction
@@ -404,7 +411,7 @@ class Engine:
 
     def __getstate__(self) -> dict[str, Any]:
         """Everything but the compiled step (a module), which the copy composes again on its first step."""
-        return {**self.__dict__, "_compiled": None, "_consts": None}
+        return {**self.__dict__, "_compiled": None, "_consts": None, "_net_consts": None}
 
     # ------------------------------------------------------------------ the compiled step
     def _compose(self) -> tuple[Array, Any, Any]:
@@ -422,7 +429,8 @@ class Engine:
             mod = compose(blocks(self.observer), [(t, TERMS[t].row) for t in terms], sc.route_row, moving, sc.pose_row,
                           network=self._net is not None, timed=self._timed)  # fmt: skip
             so = self.state_observer
-            smod = compose(blocks(so), [], sc.route_row, moving, sc.pose_row) if so is not None else None
+            smod = (compose(blocks(so), [], sc.route_row, moving, sc.pose_row, network=self._net is not None,
+                            timed=self._timed) if so is not None else None)  # fmt: skip
             self._compiled = (np.array([self.reward_weights[t] for t in terms]), mod, smod)
         return self._compiled
 
@@ -443,8 +451,8 @@ class Engine:
                 sense_radius=self.sense_radius, max_cycles=self.max_cycles, hold_steps=self.scenario.hold_steps,
                 n_nearest=self.n_nearest, k_nearest=self.k_nearest,
                 end_on_success=self.scenario.terminate_on_success,
-                **(self._net.consts if self._net is not None else NO_NETWORK_CONSTS),
             )  # fmt: skip
+            self._net_consts = NetConsts(**self._net.consts) if self._net is not None else None
         return self._consts, mod
 
     def _noise(self, B: int, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> Array:
@@ -460,10 +468,13 @@ class Engine:
         p = state.params
         mov = tuple([p[ob.key] for ob in self._moving]) if self._moving else ()
         ep = Episode(p["_pvec"], p["_ca"], p["_ce"], p["_cr"], mov, p["_goal_p"])
+        net = self._net_consts is not None
         given = tuple(
             val if val is not None else _PLACEHOLDERS.get(spec.state, np.zeros((state.x.shape[0], 0, 0)))
-            for spec, val in zip(STATE_INPUTS, _STATE_ARGS(state), strict=True)
+            for spec, val in zip(_STATE_SPECS[net], _STATE_ARGS[net](state), strict=True)
         )
+        if net:
+            return (c, self._net_consts, ep, *given, a, x1, mem1, noise)
         return (c, ep, *given, a, x1, mem1, noise)
 
     # ------------------------------------------------------------------ the API
@@ -531,7 +542,7 @@ class Engine:
         args = self._args(c, state, a, x1, mem1, self._noise(B, rng))
         threaded = B >= PARALLEL_FROM and numba.get_num_threads() > 1
         raw, obs, rew = (mod.step_parallel if threaded else mod.step)(*args)
-        out: Any = Outputs._make(raw)  # fields from kernel.ARRAYS
+        out: Any = Outputs._make(raw if self._net is not None else (*raw, *_NO_NET_OUT))  # fields: kernel.ARRAYS
         f = out.flags
         mem = out.mem if state.memory is not None else None
         net: dict[str, Any] = {}

@@ -52,6 +52,7 @@ __all__ = [
     "ArraySpec",
     "Consts",
     "Episode",
+    "NetConsts",
     "Outputs",
     "Part",
     "array_table",
@@ -99,6 +100,11 @@ class Consts(NamedTuple):
     n_nearest: int
     k_nearest: int
     end_on_success: bool
+
+
+class NetConsts(NamedTuple):
+    """The network's constants (:data:`ARRAYS`, written by ``engine``), an argument of a networked step only."""
+
     followers: Ints
     net_recv: Ints
     net_send: Ints
@@ -206,21 +212,6 @@ ARRAYS: tuple[ArraySpec, ...] = (
     ArraySpec("vel", "(B, n, d)", "m/s", _LAW, "velocities (C A x, or the change of position over the period)",
               f"{_E}(pos0.shape)", "state", True),
     ArraySpec("k", "(B,)", "samples", _LAW, "samples taken after the step", f"{_E}(B, np.int64)", "state", True),
-    # the network (instead of the law's map, when the engine has one)
-    ArraySpec("sent", "(B, d_n, n, q)", "state", "network", "what was sent at k, ..., k - d + 1",
-              f"{_E}(sent0.shape)", observe="", out=True),
-    ArraySpec("corr", "(B, d_i, n_f, q)", "state", "network", "the corrections c(k), ..., c(k - d + 1)",
-              f"{_E}(corr0.shape)", observe="", out=True),
-    ArraySpec("held", "(B, m_h, q)", "state", "network", "the value each link holds after the step",
-              f"{_E}(held0.shape)", observe="", out=True),
-    ArraySpec("rng", "(B, 4)", "1", "network", "each copy's generator state after the step's draws",
-              f"{_E}(rng0.shape, np.uint64)", observe="", out=True),
-    ArraySpec("lost", "(B,)", "samples", "network", "link samples lost since the reset, after the step",
-              f"{_E}(lost0.shape, np.int64)", observe="", out=True),
-    ArraySpec("period", "(B,)", "s", "network", "the sample's period T_k (drawn under jitter, else T)",
-              f"{_E}(lost0.shape[0])", observe="", out=True),
-    ArraySpec("time", "(B,)", "s", "network", "under jitter, the env time after the step (else (0,))",
-              f"{_E}(time0.shape)", observe="", out=True),
     # obstacles
     ArraySpec("cur_a", "(B, m, d)", "m", "capsules", "every capsule's axis start at t = k T (static, then each "
               "moving type's)", f"{_E}((B, m, d))"),
@@ -255,6 +246,21 @@ ARRAYS: tuple[ArraySpec, ...] = (
     ArraySpec("route0", "(B, n)", "m", "route", "each agent's route length to its goal before the step (the "
               "scenario's route_row)", f"{_E}((B, n))"),
     ArraySpec("route1", "(B, n)", "m", "route", "route lengths after the step", f"{_E}((B, n))"),
+    # the network (instead of the law's map, when the engine has one)
+    ArraySpec("sent", "(B, d_n, n, q)", "state", "network", "what was sent at k, ..., k - d + 1",
+              f"{_E}(sent0.shape)", observe="", out=True),
+    ArraySpec("corr", "(B, d_i, n_f, q)", "state", "network", "the corrections c(k), ..., c(k - d + 1)",
+              f"{_E}(corr0.shape)", observe="", out=True),
+    ArraySpec("held", "(B, m_h, q)", "state", "network", "the value each link holds after the step",
+              f"{_E}(held0.shape)", observe="", out=True),
+    ArraySpec("rng", "(B, 4)", "1", "network", "each copy's generator state after the step's draws",
+              f"{_E}(rng0.shape, np.uint64)", observe="", out=True),
+    ArraySpec("lost", "(B,)", "samples", "network", "link samples lost since the reset, after the step",
+              f"{_E}(lost0.shape, np.int64)", observe="", out=True),
+    ArraySpec("period", "(B,)", "s", "network", "the sample's period T_k (drawn under jitter, else T)",
+              f"{_E}(lost0.shape[0])", observe="", out=True),
+    ArraySpec("time", "(B,)", "s", "network", "under jitter, the env time after the step (else (0,))",
+              f"{_E}(time0.shape)", observe="", out=True),
     # the engine's constants
     ArraySpec("leaders", "(n_l,)", "index", "engine", "the leaders' agent indices"),
     ArraySpec("others", "(n_l, n_l - 1)", "index", "engine", "the other leaders of each (leader indices)"),
@@ -313,9 +319,9 @@ ARRAYS: tuple[ArraySpec, ...] = (
 )
 # fmt: on
 SPECS: dict[str, ArraySpec] = {a.name: a for a in ARRAYS}
-if set(Consts._fields) != {a.name for a in ARRAYS if a.writer == "engine"} or set(Episode._fields) != {
-    a.name for a in ARRAYS if a.writer == "reset"
-}:  # pragma: no cover  (a declaration out of step with the records)
+if set(Consts._fields) | set(NetConsts._fields) != {a.name for a in ARRAYS if a.writer == "engine"} or set(
+    Episode._fields
+) != {a.name for a in ARRAYS if a.writer == "reset"}:  # pragma: no cover  (a declaration out of step with the records)
     raise RuntimeError("kernel.ARRAYS must declare every field of Consts (engine) and Episode (reset)")
 
 #: What the step returns of its arrays, in :data:`ARRAYS` order (the compiled step returns a plain tuple, since
@@ -323,6 +329,20 @@ if set(Consts._fields) != {a.name for a in ARRAYS if a.writer == "engine"} or se
 Outputs = namedtuple("Outputs", [a.name for a in ARRAYS if a.out])  # type: ignore[misc]
 #: The state arrays, the step's inputs after ``c`` and ``ep``.
 STATE_INPUTS: tuple[ArraySpec, ...] = tuple(a for a in ARRAYS if a.writer == "state")
+#: The arrays only a networked step has (its state inputs and outputs): a step without a network neither takes
+#: nor returns them, nor ``NetConsts``, so it costs what it cost before networks existed.
+NETWORK_ONLY: frozenset[str] = frozenset(
+    a.name for a in ARRAYS if a.writer == "network" or (a.writer == "state" and a.state.startswith("net_"))
+)
+#: The outputs of a step without a network (the first fields of ``Outputs``; the network's follow).
+NOMINAL_OUTPUTS: tuple[str, ...] = tuple(f for f in Outputs._fields if f not in NETWORK_ONLY)
+if Outputs._fields[: len(NOMINAL_OUTPUTS)] != NOMINAL_OUTPUTS:  # pragma: no cover
+    raise RuntimeError("kernel.ARRAYS must declare the network's outputs after every other output")
+
+
+def step_inputs(network: bool) -> tuple[ArraySpec, ...]:
+    """The state arrays a composed step takes (the network's only when it has one), in argument order."""
+    return tuple(a for a in STATE_INPUTS if network or a.name not in NETWORK_ONLY)
 
 
 # ---------------------------------------------------------------------------- the parts of a row
@@ -645,7 +665,12 @@ def array_table() -> str:
 _COMPOSED: dict[str, Any] = {}
 #: Names a part's line may use beside the arrays: the row, the observation buffers, the rewards, a pose.
 _LOCALS = ("b", "buf", "obs", "noise", "rew", "pose")
-_INPUTS = ("c", "ep", *(a.name for a in STATE_INPUTS), "act", "x_in", "mem_in", "noise")
+
+
+def _inputs(network: bool) -> tuple[str, ...]:
+    """The composed step's parameters: constants (and the network's), episode, state, actions, law, noise."""
+    return ("c", *(("nc",) if network else ()), "ep", *(a.name for a in step_inputs(network)), "act", "x_in",
+            "mem_in", "noise")  # fmt: skip
 
 
 def _name(fn: Any) -> tuple[str, str]:
@@ -884,13 +909,13 @@ def compose(
     observe_row = [line for p in observe_parts for line in composer.part_lines(p, True)] + obs_lines
     step_alloc, observe_alloc = _alloc(step_row, step_parts, False), _alloc(observe_row, observe_parts, True)
     src = _TEMPLATE.format(
-        inputs=", ".join(_INPUTS),
+        inputs=", ".join(_inputs(network)),
         head=_head([*step_row, *observe_row, step_alloc, observe_alloc], len(moving)),
         step_alloc=step_alloc,
         observe_alloc=observe_alloc,
         step_row="\n".join("        " + line for line in step_row),
         observe_row="\n".join("        " + line for line in observe_row),
-        outputs=", ".join(Outputs._fields),
+        outputs=", ".join(Outputs._fields if network else NOMINAL_OUTPUTS),
     )
     part_rows = {fn.__name__: fn for part in PARTS for fn in (*part.rows, *(part.observe_rows or ()))}
     kernel_funcs = [affine_into, finish_obs, static_capsules, static_goal, *part_rows.values()]
@@ -907,6 +932,7 @@ def _head(lines: Sequence[str], n_moving: int) -> str:
     used = _reads(lines) | {"obs_low", "cap_r"}
     out = ["B, n, d = pos0.shape", "n_l = act.shape[1]", "D = obs_low.shape[0]"]
     out = [f"{nm} = c.{nm}" for nm in Consts._fields if nm in used] + out
+    out += [f"{nm} = nc.{nm}" for nm in NetConsts._fields if nm in used]
     out += [f"{nm} = ep.{nm}" for nm in Episode._fields if nm in used]
     out += [f"mov_p{j} = ep.mov_p[{j}]" for j in range(n_moving)]
     out += ["m0 = cap_r.shape[1]"] + [f"m{j + 1} = m{j} + mov_p{j}.shape[1]" for j in range(n_moving)]
@@ -920,7 +946,7 @@ def _alloc(lines: Sequence[str], parts: Sequence[str], observe: bool) -> str:
     names = {_target_array(t) for p in PARTS if p.name in parts for t in ((p.observe if observe else p.writes) or ())}
     names |= _reads(lines) & {a.name for a in ARRAYS if a.writer not in ("state", "engine", "reset")}
     if not observe:
-        names |= set(Outputs._fields)
+        names |= set(Outputs._fields) - (NETWORK_ONLY if "network" not in parts else frozenset())
     out = []
     for spec in ARRAYS:
         if spec.name not in names or spec.name == "act":

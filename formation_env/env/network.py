@@ -329,7 +329,7 @@ class NetworkSetup(NamedTuple):
     Attributes:
         network: the :class:`~formation_env.core.network.Network`.
         loop: the core's :class:`~formation_env.core.network.NetworkLoop` (its ``initial_state`` is the reset's).
-        consts: the step's network constants (``kernel.Consts`` fields, see :data:`~formation_env.env.kernel.ARRAYS`).
+        consts: the step's network constants (``kernel.NetConsts`` fields; :data:`~formation_env.env.kernel.ARRAYS`).
     """
 
     network: Network
@@ -387,24 +387,3 @@ class NetworkSetup(NamedTuple):
             "net_lost": np.zeros(x.shape[0], dtype=np.int64),
             "net_time": np.zeros(x.shape[0]) if self.network.jitter is not None else None,
         }
-
-
-#: The network's constants when there is none (the step's arguments keep their types; the part is not composed).
-NO_NETWORK_CONSTS: dict[str, Any] = {
-    "followers": np.zeros(0, dtype=np.int64),
-    "net_recv": np.zeros(0, dtype=np.int64),
-    "net_send": np.zeros(0, dtype=np.int64),
-    "net_w": np.zeros(0),
-    "net_row": np.zeros(0, dtype=np.int64),
-    "net_gain": np.zeros((0, 0)),
-    "zoh_a": np.zeros((0, 0)),
-    "zoh_b": np.zeros((0, 0)),
-    "dyn_a": np.zeros((0, 0)),
-    "dyn_b": np.zeros((0, 0)),
-    "zoh_kind": ZOH_FIXED,
-    "loss": 0.0,
-    "hold": False,
-    "quant": QUANT_NONE,
-    "quant_step": 0.0,
-    "jitter": np.zeros(0),
-}

@@ -84,17 +84,11 @@ _FIELDS = tuple(f for f in EngineState._fields if f != "params")
 #: network.
 _STATE_SPECS = {net: step_inputs(net) for net in (False, True)}
 _STATE_ARGS = {net: operator.attrgetter(*(spec.state for spec in specs)) for net, specs in _STATE_SPECS.items()}
+_MEMORY_AT = [spec.state for spec in _STATE_SPECS[False]].index("memory")  # the same with a network
 #: The outputs a step without a network does not return.
 _NO_NET_OUT = (None,) * (len(Outputs._fields) - len(NOMINAL_OUTPUTS))
-#: What the compiled step gets for a state field that is None (no law memory, no network): empty arrays.
-_PLACEHOLDERS: dict[str, Any] = {
-    "net_sent": np.zeros((0, 0, 0, 0)),
-    "net_corr": np.zeros((0, 0, 0, 0)),
-    "net_held": np.zeros((0, 0, 0)),
-    "net_rng": np.zeros((0, 4), dtype=np.uint64),
-    "net_lost": np.zeros(0, dtype=np.int64),
-    "net_time": np.zeros(0),
-}
+#: What a networked step gets for a state field that is None (no jitter): an empty array.
+_PLACEHOLDERS: dict[str, Any] = {"net_time": np.zeros(0)}
 #: The info entries of a step (arrays (B,) from :meth:`Engine.step`), with their units.
 INFO_KEYS: dict[str, str] = {
     "success": "bool",
@@ -469,10 +463,12 @@ class Engine:
         mov = tuple([p[ob.key] for ob in self._moving]) if self._moving else ()
         ep = Episode(p["_pvec"], p["_ca"], p["_ce"], p["_cr"], mov, p["_goal_p"])
         net = self._net_consts is not None
-        given = tuple(
-            val if val is not None else _PLACEHOLDERS.get(spec.state, np.zeros((state.x.shape[0], 0, 0)))
-            for spec, val in zip(_STATE_SPECS[net], _STATE_ARGS[net](state), strict=True)
-        )
+        given = _STATE_ARGS[net](state)
+        if state.memory is None:  # an empty array stands for no memory
+            given = (*given[:_MEMORY_AT], np.zeros((state.x.shape[0], 0, 0)), *given[_MEMORY_AT + 1 :])
+        if net and state.net_time is None:  # nor for no jitter
+            specs = _STATE_SPECS[net]
+            given = tuple(_PLACEHOLDERS[sp.state] if v is None else v for sp, v in zip(specs, given, strict=True))
         if net:
             return (c, self._net_consts, ep, *given, a, x1, mem1, noise)
         return (c, ep, *given, a, x1, mem1, noise)

@@ -237,3 +237,29 @@ def test_checkers_accept_a_network():
     net = NETWORKS["combination"]
     make = functools.partial(formation_v0.parallel_env, scenario="hold", follower_law="linear", network=net)
     parallel_api_test(make(), num_cycles=50)
+
+
+def test_a_sparse_stress_runs_the_same_network(monkeypatch):
+    """Above config.MAX_AGENTS the stress is CSR and the engine keeps no law map; the network part needs none:
+    the same draws and states as the dense path, and every info key."""
+    from formation_env.core.frameworks import trilateration
+    from formation_env.env import config
+
+    fw = trilateration(60, 2, seed=0)
+    runs = {}
+    for sparse in (False, True):
+        monkeypatch.setattr(config, "MAX_AGENTS", 30 if sparse else 256)
+        eng = _engine("hold", "double_integrator", "linear", NETWORKS["combination"], framework=fw, agent_radius=0.01)
+        assert eng.sparse == sparse and (eng._M is None) == sparse
+        s = eng.reset(np.random.default_rng(2), 2)
+        rng = np.random.default_rng(5)
+        out = []
+        for _ in range(10):
+            s, _, _, _, _, info = eng.step(s, rng.uniform(-1, 1, (2, eng.n_l, eng.p)))
+            out.append((s.x, s.net_lost, info))
+        runs[sparse] = out
+    for dense, sp_ in zip(runs[False], runs[True], strict=True):
+        np.testing.assert_allclose(dense[0], sp_[0], atol=1e-8)
+        np.testing.assert_array_equal(dense[1], sp_[1])
+        for key, val in dense[2].items():
+            np.testing.assert_allclose(val, sp_[2][key], atol=1e-8, err_msg=key)

@@ -140,7 +140,9 @@ def test_contract_example():
         "goal_distance",
         "control_effort",
         "time",
+        "lost_fraction",
     }
+    assert info["lost_fraction"] == 0.0  # no network
     assert infos["leader_0"] is not infos["leader_1"]
     assert all(o.dtype == np.float32 and env.observation_space(a).contains(o) for a, o in obs.items())
     img = env.render()

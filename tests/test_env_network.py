@@ -263,3 +263,18 @@ def test_a_sparse_stress_runs_the_same_network(monkeypatch):
         np.testing.assert_array_equal(dense[1], sp_[1])
         for key, val in dense[2].items():
             np.testing.assert_allclose(val, sp_[2][key], atol=1e-8, err_msg=key)
+
+
+def test_a_networked_step_is_pure():
+    """The generators' states are state arrays: stepping the same state twice draws the same losses and periods,
+    and leaves the state as it was."""
+    eng = _engine("moving_obstacles", "double_integrator", "linear", NETWORKS["combination"])
+    s = eng.reset(np.random.default_rng(3), 2)
+    before = {f: np.copy(getattr(s, f)) for f in s._fields if f != "params" and getattr(s, f) is not None}
+    a = np.full((2, eng.n_l, eng.p), 0.4)
+    one, two = eng.step(s, a), eng.step(s, a)
+    for f, val in before.items():
+        np.testing.assert_array_equal(getattr(s, f), val, err_msg=f)
+    for f in ("x", "net_rng", "net_lost", "net_time"):
+        np.testing.assert_array_equal(getattr(one[0], f), getattr(two[0], f), err_msg=f)
+    assert not np.array_equal(one[0].net_rng, s.net_rng)

@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from formation_env.core.dynamics import c2d_zoh
+from formation_env.core.network import NetState
 from formation_env.env.engine import Engine, EngineState
+from formation_env.env.network import generator_of, words_of
 from formation_env.env.obstacles import Capsules
 
 
@@ -96,18 +99,54 @@ def ray_ranges(o, u, caps: Capsules, max_range: float, samples: int = 3001):
 
 
 # ---------------------------------------------------------------------------- the step
+def network_law(eng: Engine, state: EngineState, u):
+    """The followers' law over the engine's network, copy by copy: the core's ``NetworkLoop.step`` with the draws
+    of ``Network.draw`` on each copy's generator (read from ``state.net_rng``); (x', periods (B,), the network's
+    state fields after the step)."""
+    net, loop, dyn = eng.network, eng._net.loop, eng.dynamics
+    B = state.batch_size
+    x1, periods = np.empty_like(state.x), np.empty(B)
+    fields = {f: np.empty_like(getattr(state, f)) for f in ("net_sent", "net_corr", "net_held", "net_rng")}
+    lost = state.net_lost.copy()
+    for b in range(B):
+        gen = generator_of(state.net_rng[b])
+        t_k, delivered = net.draw(gen, eng.dt, loop.m)
+        if net.jitter is None or dyn.discrete:
+            a_d, b_d = dyn.zoh(t_k)
+        elif not np.any(dyn.A):
+            a_d, b_d = np.eye(dyn.q), t_k * dyn.B
+        else:
+            a_d, b_d = c2d_zoh(dyn.A, dyn.B, t_k)
+        st = NetState(state.x[b], state.net_sent[b], state.net_corr[b], state.net_held[b])
+        nxt, _ = loop.step(st, delivered, a_d, b_d, u[b])
+        x1[b], periods[b] = nxt.x, t_k
+        fields["net_sent"][b], fields["net_corr"][b], fields["net_held"][b] = nxt.sent, nxt.corr, nxt.held
+        fields["net_rng"][b] = words_of(gen)
+        lost[b] += int(np.sum(~delivered))
+    return x1, periods, {**fields, "net_lost": lost}
+
+
 def oracle_step(eng: Engine, state: EngineState, actions):
     """(state', obs, rewards, terminated, truncated, info) of the default observation and rewards."""
     a = np.clip(np.asarray(actions, dtype=np.float64), -1.0, 1.0)
     u = eng.u_max * a
-    x1, mem1 = eng.law.step(state.x, u, state.memory)
+    net: dict = {}
+    if eng.network is None:
+        x1, mem1 = eng.law.step(state.x, u, state.memory)
+        period = np.full(state.batch_size, eng.dt)
+    else:
+        x1, period, net = network_law(eng, state, u)
+        mem1 = None
     pos = np.einsum("dq,bnq->bnd", eng.dynamics.C, x1)
     if not eng.dynamics.discrete and not np.any(eng.dynamics.C @ eng.dynamics.B):
         vel = np.einsum("dq,bnq->bnd", eng.dynamics.C @ eng.dynamics.A, x1)
     else:
-        vel = (pos - state.pos) / eng.dt
+        vel = (pos - state.pos) / period[:, None, None]
     k = state.k + 1
-    t = k * eng.dt
+    t0 = eng.time(state)
+    t = t0 + period if state.net_time is not None else k * eng.dt
+    if state.net_time is not None:
+        net["net_time"] = t
     B, n, d = pos.shape
     sc = eng.scenario
     # goals
@@ -124,10 +163,10 @@ def oracle_step(eng: Engine, state: EngineState, actions):
     pairs = [(i, j) for i in range(n) for j in range(i + 1, n)] if n <= 64 else [tuple(e) for e in eng.fw.edges]
     for i, j in pairs:
         clear = np.minimum(clear, np.linalg.norm(pos[:, i] - pos[:, j], axis=-1) - 2 * eng.agent_radius)
-    caps = eng.capsules(state.params, k)
+    caps = eng.capsules(state.params, k, t)
     if caps.a.shape[1]:
         clear = np.minimum(clear, capsule_distance(pos, caps).min(axis=(1, 2)) - eng.agent_radius)
-        caps0 = eng.capsules(state.params, state.k)
+        caps0 = eng.capsules(state.params, state.k, t0)
         shift = np.abs(caps.a - caps0.a).max(axis=(1, 2), initial=0.0)
         turned = np.any(caps.e != caps0.e, axis=(1, 2)) | np.any(caps.rad != caps0.rad, axis=1)
         ends = np.abs(caps.a + caps.e - caps0.a - caps0.e).max(axis=(1, 2), initial=0.0)
@@ -184,8 +223,9 @@ def oracle_step(eng: Engine, state: EngineState, actions):
         - w["collision"] * collision[:, None]
         + w["success"] * success[:, None]
     )
-    new = EngineState(x1, pos, vel, mem1, k, goal, goal_vel, gl1, err, streak, state.params)
+    new = EngineState(x1, pos, vel, mem1, k, goal, goal_vel, gl1, err, streak, state.params, **net)
+    lost = net["net_lost"] / (k * eng._net.loop.m) if net else np.zeros(B)
     info = {"success": success, "collision": collision, "out_of_bounds": oob, "formation_error": err,
             "min_clearance": clear, "goal_distance": gd.max(axis=1), "time": t,
-            "control_effort": np.sum(u * u, axis=-1)}  # fmt: skip
+            "control_effort": np.sum(u * u, axis=-1), "lost_fraction": lost}  # fmt: skip
     return new, obs, rew, terminated, truncated, info

@@ -214,9 +214,13 @@ def test_each_array_has_one_writer_per_phase(monkeypatch):
     second part writing one is refused."""
     from formation_env.env import kernel
 
-    for observe, parts in ((False, kernel.PART_NAMES), (True, kernel.PART_NAMES)):
-        kernel._check_writers(parts, observe, "declaration")
-    network = kernel.Part("network", ("pos", "flags:collision"), None, "a part that writes what the law writes")
-    monkeypatch.setattr(kernel, "PARTS", (*kernel.PARTS, network))
-    with pytest.raises(RuntimeError, match="'pos' is written by parts 'law' and 'network'"):
-        kernel._check_writers(["law", "network"], False, "step")
+    for networked in (False, True):  # the network part takes the law's place: one of them is composed
+        parts = [p for p in kernel.PART_NAMES if p not in kernel._left_out(networked)]
+        for observe in (False, True):
+            kernel._check_writers(parts, observe, "declaration")
+    with pytest.raises(RuntimeError, match="'act' is written by parts 'law' and 'network'"):
+        kernel._check_writers(kernel.PART_NAMES, False, "step")
+    relay = kernel.Part("relay", ("pos", "flags:collision"), None, "a part that writes what the law writes")
+    monkeypatch.setattr(kernel, "PARTS", (*kernel.PARTS, relay))
+    with pytest.raises(RuntimeError, match="'pos' is written by parts 'law' and 'relay'"):
+        kernel._check_writers(["law", "relay"], False, "step")

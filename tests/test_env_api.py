@@ -55,6 +55,20 @@ def test_pettingzoo_checkers(combo):
     max_cycles_test(mod)
 
 
+#: A network with every model on, for the checkers (its draws come from the env's generator, seeded at the reset).
+NETWORK = {"delay": 1, "loss": 0.25, "jitter": (0.08, 0.12), "quantise": ("uniform", 0.01)}
+NET_LAWS = [("double_integrator", "linear"), ("single_integrator", "stationary")]
+
+
+@pytest.mark.parametrize(("dynamics", "law"), NET_LAWS)
+@pytest.mark.parametrize("scenario", sorted(REGISTRY))
+def test_pettingzoo_checkers_with_a_network(scenario, dynamics, law):
+    kw = {"scenario": scenario, "dynamics": dynamics, "follower_law": law, "network": NETWORK}
+    parallel_api_test(formation_v0.parallel_env(**kw), num_cycles=100)
+    api_test(formation_v0.env(**kw), num_cycles=50)
+    seed_test(functools.partial(formation_v0.env, **kw), num_cycles=50)
+
+
 @pytest.mark.parametrize("combo", COMBOS, ids=IDS)
 def test_render(combo):
     render_test(functools.partial(formation_v0.env, **_kwargs(combo)))
@@ -126,7 +140,9 @@ def test_contract_example():
         "goal_distance",
         "control_effort",
         "time",
+        "lost_fraction",
     }
+    assert info["lost_fraction"] == 0.0  # no network
     assert infos["leader_0"] is not infos["leader_1"]
     assert all(o.dtype == np.float32 and env.observation_space(a).contains(o) for a, o in obs.items())
     img = env.render()

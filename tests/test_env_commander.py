@@ -16,6 +16,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 import formation_env  # noqa: F401  (registers the env)
 from formation_env.core.errors import FormationError
 from formation_env.env.commander import FormationCommanderEnv
+from formation_env.env.scenarios import REGISTRY
 
 ENV_ID = "formation_env/FormationCommander-v0"
 
@@ -35,6 +36,19 @@ def test_checkers(mode, scenario, dynamics):
         warnings.simplefilter("error")  # any checker warning fails the test
         gym_check_env(env, skip_render_check=True)
         sb3_check_env(FormationCommanderEnv(scenario=scenario, action_mode=mode, dynamics=dynamics), warn=True)
+
+
+@pytest.mark.parametrize("scenario", sorted(REGISTRY))
+def test_checkers_with_a_network(scenario):
+    kw = {"scenario": scenario, "follower_law": "linear", "network": {"delay": 1, "loss": 0.25, "jitter": (0.08, 0.12)}}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any checker warning fails the test
+        gym_check_env(FormationCommanderEnv(**kw), skip_render_check=True)
+        sb3_check_env(FormationCommanderEnv(**kw), warn=True)
+    env = FormationCommanderEnv(**kw)
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(env.action_space.sample())
+    assert 0.0 <= info["lost_fraction"] <= 1.0
 
 
 def test_registered_and_makes():

@@ -68,6 +68,15 @@ CASES = [
     ("formation_env/ObstacleField-v0", {"max_episode_steps": 30}),
     ("formation_env/Maneuver-v1", {"max_episode_steps": 9, "action_mode": "maneuver"}),
     ("formation_env/FormationCommander-v1", {"scenario": "moving_obstacles", "max_cycles": 15}),
+    # a communication network (its draws from each env's generator, seeded at the reset)
+    (
+        "formation_env/MovingObstacles-v1",
+        {
+            "max_episode_steps": 20,
+            "follower_law": "linear",
+            "network": {"delay": 1, "loss": 0.3, "jitter": (0.08, 0.12)},
+        },
+    ),
 ]
 
 

@@ -40,6 +40,7 @@ def test_reset_each_equals_engine_resets(scenario):
         ("obstacle_field", {"dynamics": "single_integrator", "follower_law": "stationary"}),
         ("maneuver", {"follower_law": "dynamic_distributed"}),
         ("hold", {"framework": "bipyramid_3d"}),
+        ("moving_obstacles", {"follower_law": "linear", "network": {"loss": 0.3, "delay": 1, "jitter": (0.08, 0.12)}}),
     ],
 )
 def test_shared_mode_replays_the_parallel_env(scenario, kwargs):

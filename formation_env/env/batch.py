@@ -291,6 +291,7 @@ class FormationBatch:
             "goal_distance": np.repeat(gd, self._per_env),
             "time": np.zeros(n),
             "control_effort": np.zeros(n),
+            "lost_fraction": np.zeros(n),
         }
         assert set(values) == set(INFO_KEYS)
         return values

@@ -28,6 +28,7 @@ from formation_env.core.affine import AffineImage
 from formation_env.core.dynamics import LinearDynamics
 from formation_env.core.errors import ControlDimension, FormationError, StabilityWarning
 from formation_env.core.framework import Framework
+from formation_env.core.network import NETWORK_LAWS, Network, check_network, check_network_law
 from formation_env.core.validation import as_array, check_mapping
 
 from . import config
@@ -38,13 +39,16 @@ from .kernel import (
     FLAG_SUCCESS,
     FLAG_TERMINATED,
     FLAG_TRUNCATED,
-    STATE_INPUTS,
+    NOMINAL_OUTPUTS,
     Consts,
     Episode,
+    NetConsts,
     Outputs,
     compose,
     fit_rows,
+    step_inputs,
 )
+from .network import NetworkSetup, network_seeds
 from .observations import DEFAULT_OBSERVATION, Observer
 from .obstacles import Capsules, ray_directions
 from .rewards import REWARD_TERMS, TERMS
@@ -74,11 +78,17 @@ PARALLEL_FROM = 64
 #: Placeholders of the compiled step's optional inputs (no law state given, no observation noise).
 _NO_STATE = np.zeros((0, 0, 0))
 _NO_NOISE = np.zeros((0, 0, 0))
-#: The fields of ``EngineState`` but ``params`` (the last).
-_FIELDS = EngineState._fields[:-1]
-#: The state's fields the compiled step takes, in its argument order (``kernel.STATE_INPUTS``).
-_STATE_ARGS = operator.attrgetter(*(spec.state for spec in STATE_INPUTS))
-_MEMORY_AT = [spec.state for spec in STATE_INPUTS].index("memory")
+#: The fields of ``EngineState`` but ``params``.
+_FIELDS = tuple(f for f in EngineState._fields if f != "params")
+#: The state's fields the compiled step takes, in its argument order (``kernel.step_inputs``), without and with a
+#: network.
+_STATE_SPECS = {net: step_inputs(net) for net in (False, True)}
+_STATE_ARGS = {net: operator.attrgetter(*(spec.state for spec in specs)) for net, specs in _STATE_SPECS.items()}
+_MEMORY_AT = [spec.state for spec in _STATE_SPECS[False]].index("memory")  # the same with a network
+#: The outputs a step without a network does not return.
+_NO_NET_OUT = (None,) * (len(Outputs._fields) - len(NOMINAL_OUTPUTS))
+#: What a networked step gets for a state field that is None (no jitter): an empty array.
+_PLACEHOLDERS: dict[str, Any] = {"net_time": np.zeros(0)}
 #: The info entries of a step (arrays (B,) from :meth:`Engine.step`), with their units.
 INFO_KEYS: dict[str, str] = {
     "success": "bool",
@@ -89,6 +99,7 @@ INFO_KEYS: dict[str, str] = {
     "goal_distance": "m",
     "time": "s",
     "control_effort": "(m/s)^2 or (m/s^2)^2, per leader",
+    "lost_fraction": "1, lost link samples / all link samples into the followers since the reset (0 without loss)",
 }
 
 
@@ -117,6 +128,10 @@ class Engine:
         sense_radius: how far a leader sees other agents (``nearest_agents``) and obstacles (m; None: no limit
             beyond ``sensor_range``).
         obs_noise: standard deviation of Gaussian noise added to the measurement blocks (each entry's units).
+        network: a communication network between the agents (``core.network.Network`` or a dict of its fields;
+            None: perfect): delay, packet loss, jitter, quantisation of what the followers receive, applied in the
+            compiled step (``env.network``; docs/networks.md, "In the env"). Needs follower_law ``linear`` (or
+            ``stationary`` with single integrators); each copy's draws come from a generator seeded at the reset.
         **scenario_kwargs: the scenario's own arguments (unknown ones raise TypeError).
 
     Contacts (collisions): two agents closer than 2 radii, an agent centre within one radius of an obstacle's
@@ -151,6 +166,7 @@ class Engine:
         k_nearest: int = 3,
         sense_radius: float | None = None,
         obs_noise: float = 0.0,
+        network: Network | dict[str, Any] | None = None,
         **scenario_kwargs: Any,
     ) -> None:
         if not isinstance(scenario, str) or scenario not in REGISTRY:
@@ -181,6 +197,7 @@ class Engine:
         self.sparse = sp.issparse(om)
         self.dynamics = dyn = resolve_dynamics(dynamics, fw.d)
         check_combination(follower_law, dyn)
+        self.network = _checked_network(network, follower_law)
         self.follower_law = follower_law
         self.dt = float(dt)
         self.max_cycles = int(max_cycles)
@@ -207,10 +224,21 @@ class Engine:
         lp = dict(law_params or {})
         self.law, self._M, rho = config.make_follower_law(om, fw.leaders, dyn, follower_law, self.dt, lp)
         self.law_params = lp
+        #: The network's constants and loop (None without a network).
+        self._net = NetworkSetup.build(self.network, self.law, dyn, self.dt) if self.network is not None else None
+        #: The env time is the sum of the drawn periods (state ``net_time``), not k T.
+        self._timed = self.network is not None and self.network.jitter is not None
+        over = ""
+        if self._net is not None:
+            from formation_env.core.analysis import network_stability
+
+            net_rho = network_stability(self.law.part, dyn, self.dt, self._net.loop.G, self.network)
+            rho = rho if net_rho is None else net_rho  # None: beyond the analysed size
+            over = f" over {self.network} (decay factor per sample)"
         self.spectral_radius = rho
         if rho >= 1.0:
             warnings.warn(
-                f"follower_law={follower_law!r} at dt={dt} is unstable on this framework: spectral radius "
+                f"follower_law={follower_law!r} at dt={dt} is unstable on this framework{over}: spectral radius "
                 f"{rho:.4g} >= 1 (see formation_env.core.analysis.stability_report)",
                 StabilityWarning,
                 stacklevel=2,
@@ -253,6 +281,7 @@ class Engine:
         self._build_state_bounds()
         self._compiled: tuple[Array, Any, Any] | None = None
         self._consts: Consts | None = None
+        self._net_consts: NetConsts | None = None
         self._compose()  # every component's parameters are checked now, not at the first step
 
     # ------------------------------------------------------------------ construction
@@ -302,14 +331,16 @@ class Engine:
             raise FormationError(f"batch size B must be a positive integer, got {B!r}")
         if not isinstance(rng, np.random.Generator):
             raise TypeError(f"rng must be a np.random.Generator, got {type(rng).__name__}")
-        return self._start(self.scenario.reset(rng, int(B)))
+        params = self.scenario.reset(rng, int(B))
+        return self._start(params, network_seeds(rng, int(B)) if self._net is not None else None)
 
     def reset_each(self, rngs: Sequence[np.random.Generator]) -> EngineState:
         """One new episode per generator, batched: entry b equals ``reset(rngs[b], 1)`` (the same draws; for
         vectorised envs whose copies are seeded one by one)."""
-        return self._start(self.scenario.reset_each(rngs))
+        params = self.scenario.reset_each(rngs)
+        return self._start(params, network_seeds(list(rngs), len(rngs)) if self._net is not None else None)
 
-    def _start(self, params: dict[str, Array]) -> EngineState:
+    def _start(self, params: dict[str, Array], seeds: NDArray[np.int64] | None = None) -> EngineState:
         start = np.array(params.pop("start"), dtype=np.float64)
         B = start.shape[0]
         static = [ob.capsules(params[ob.key], np.zeros(B), self.bounds) for ob in self.obstacles if not ob.moves()]
@@ -324,8 +355,14 @@ class Engine:
         k = np.zeros(B, dtype=np.int64)
         goal, goal_vel = self._goal(params, k)
         gd = np.sqrt(np.einsum("bnd,bnd->bn", goal - start, goal - start))
+        x = start @ self._at_rest
+        net: dict[str, Any] = {}
+        if self._net is not None and seeds is not None:
+            params["_net_seed"] = seeds
+            seeds.setflags(write=False)
+            net = self._net.initial(x, seeds)
         return EngineState(
-            x=start @ self._at_rest,
+            x=x,
             pos=start,
             vel=np.zeros_like(start),
             memory=self.law.initial_memory((B,)),
@@ -336,6 +373,7 @@ class Engine:
             err=self._fit(start)[2],
             streak=np.zeros(B, dtype=np.int64),
             params=params,
+            **net,
         )
 
     # ------------------------------------------------------------------ parts of the step
@@ -350,14 +388,14 @@ class Engine:
         g1 = affine_batch(sc.r, *sc.reference(params, t + self.dt))
         return g0, (g1 - g0) * (1.0 / self.dt)
 
-    def capsules(self, params: dict[str, Array], k: NDArray[np.int64]) -> Capsules:
+    def capsules(self, params: dict[str, Array], k: NDArray[np.int64], t: Array | None = None) -> Capsules:
         """Every obstacle's capsules after k samples (B,): the static ones of the episode and the moving ones
-        at t = k T."""
+        at t = k T (or at the given env times t (B,) s, under jitter: :meth:`time`)."""
         static = Capsules(params["_ca"], params["_ce"], params["_cr"])
         if not self._moving:
             return static
         parts = [static] if static.a.shape[1] else []
-        t = self.dt * k.astype(np.float64)
+        t = self.dt * k.astype(np.float64) if t is None else t
         parts += [ob.capsules(params[ob.key], t, self.bounds) for ob in self._moving]
         return Capsules.join(parts, k.shape[0], self.d)
 
@@ -367,7 +405,7 @@ class Engine:
 
     def __getstate__(self) -> dict[str, Any]:
         """Everything but the compiled step (a module), which the copy composes again on its first step."""
-        return {**self.__dict__, "_compiled": None, "_consts": None}
+        return {**self.__dict__, "_compiled": None, "_consts": None, "_net_consts": None}
 
     # ------------------------------------------------------------------ the compiled step
     def _compose(self) -> tuple[Array, Any, Any]:
@@ -382,9 +420,11 @@ class Engine:
 
             terms = [name for name, w in self.reward_weights.items() if w != 0.0]
             moving = [ob.row for ob in self._moving]
-            mod = compose(blocks(self.observer), [(t, TERMS[t].row) for t in terms], sc.route_row, moving, sc.pose_row)
+            mod = compose(blocks(self.observer), [(t, TERMS[t].row) for t in terms], sc.route_row, moving, sc.pose_row,
+                          network=self._net is not None, timed=self._timed)  # fmt: skip
             so = self.state_observer
-            smod = compose(blocks(so), [], sc.route_row, moving, sc.pose_row) if so is not None else None
+            smod = (compose(blocks(so), [], sc.route_row, moving, sc.pose_row, network=self._net is not None,
+                            timed=self._timed) if so is not None else None)  # fmt: skip
             self._compiled = (np.array([self.reward_weights[t] for t in terms]), mod, smod)
         return self._compiled
 
@@ -406,6 +446,7 @@ class Engine:
                 n_nearest=self.n_nearest, k_nearest=self.k_nearest,
                 end_on_success=self.scenario.terminate_on_success,
             )  # fmt: skip
+            self._net_consts = NetConsts(**self._net.consts) if self._net is not None else None
         return self._consts, mod
 
     def _noise(self, B: int, rng: np.random.Generator | Sequence[np.random.Generator] | None) -> Array:
@@ -421,9 +462,15 @@ class Engine:
         p = state.params
         mov = tuple([p[ob.key] for ob in self._moving]) if self._moving else ()
         ep = Episode(p["_pvec"], p["_ca"], p["_ce"], p["_cr"], mov, p["_goal_p"])
-        given = _STATE_ARGS(state)
-        if state.memory is None:
+        net = self._net_consts is not None
+        given = _STATE_ARGS[net](state)
+        if state.memory is None:  # an empty array stands for no memory
             given = (*given[:_MEMORY_AT], np.zeros((state.x.shape[0], 0, 0)), *given[_MEMORY_AT + 1 :])
+        if net and state.net_time is None:  # nor for no jitter
+            specs = _STATE_SPECS[net]
+            given = tuple(_PLACEHOLDERS[sp.state] if v is None else v for sp, v in zip(specs, given, strict=True))
+        if net:
+            return (c, self._net_consts, ep, *given, a, x1, mem1, noise)
         return (c, ep, *given, a, x1, mem1, noise)
 
     # ------------------------------------------------------------------ the API
@@ -485,17 +532,23 @@ class Engine:
         c, mod = self._kernel()
         x1: Array = _NO_STATE
         mem1: Array = _NO_STATE
-        if self._M is None:  # sparse stress: the core law itself, then the compiled rest of the step
+        if self._M is None and self._net is None:  # sparse stress: the core law itself, then the compiled rest
             x1, law_mem = self.law.step(state.x, self.u_max * np.clip(a, -1.0, 1.0), state.memory)
             mem1 = _NO_STATE if law_mem is None else law_mem
         args = self._args(c, state, a, x1, mem1, self._noise(B, rng))
         threaded = B >= PARALLEL_FROM and numba.get_num_threads() > 1
         raw, obs, rew = (mod.step_parallel if threaded else mod.step)(*args)
-        out: Any = Outputs._make(raw)  # fields from kernel.ARRAYS
+        out: Any = Outputs._make(raw if self._net is not None else (*raw, *_NO_NET_OUT))  # fields: kernel.ARRAYS
         f = out.flags
         mem = out.mem if state.memory is not None else None
+        net: dict[str, Any] = {}
+        lost = np.zeros(B)
+        if self._net is not None:
+            net = {"net_sent": out.sent, "net_corr": out.corr, "net_held": out.held, "net_rng": out.rng,
+                   "net_lost": out.lost, "net_time": out.time if self._timed else None}  # fmt: skip
+            lost = out.lost / np.maximum(out.k * max(self._net.loop.m, 1), 1)
         new = EngineState(out.x, out.pos, out.vel, mem, out.k, out.goal, out.gvel, out.gdist, out.err, out.streak,
-                          state.params)  # fmt: skip
+                          state.params, **net)  # fmt: skip
         info = {
             "success": f[:, FLAG_SUCCESS],
             "collision": f[:, FLAG_COLLISION],
@@ -503,8 +556,9 @@ class Engine:
             "formation_error": out.err,
             "min_clearance": out.clear,
             "goal_distance": out.gmax,
-            "time": out.k * self.dt,
+            "time": out.time if self._timed else out.k * self.dt,
             "control_effort": out.effort,
+            "lost_fraction": lost,
         }
         return new, StepContext(obs, out.theta), rew, f[:, FLAG_TERMINATED], f[:, FLAG_TRUNCATED], info
 
@@ -525,7 +579,7 @@ class Engine:
             blocks, theta = smod.observe(*self._args(c, state, acts, _NO_STATE, _NO_STATE, _NO_NOISE))
         else:
             theta = self._fit(state.pos)[0] if ctx is None else ctx.theta
-        t = self.dt * state.k.astype(np.float64)
+        t = self.time(state)
         parts = [state.pos.reshape(B, -1), state.vel.reshape(B, -1), state.goal.reshape(B, -1)]
         parts += [state.goal_vel.reshape(B, -1), state.err[:, None], theta.reshape(B, -1), state.params["_pvec"]]
         parts += [ob.state_vector(state.params[ob.key], t, self.bounds) for ob in self.obstacles]
@@ -543,9 +597,13 @@ class Engine:
         out[:, self.followers] = np.einsum("fl,bld->bfd", self.law.part.localisation, state.pos[:, self.leaders])
         return out
 
+    def time(self, state: EngineState) -> Array:
+        """The env time of every copy (B,) s: k T, or under jitter the sum of the drawn periods."""
+        return state.net_time if state.net_time is not None else self.dt * state.k.astype(np.float64)
+
     def frame(self, state: EngineState, b: int = 0, trail: Array | None = None, text: str = "") -> dict[str, Any]:
         """The renderer's frame dict for batch entry ``b`` (keys: ``rendering.FRAME_KEYS``)."""
-        t = float(state.k[b] * self.dt)
+        t = float(self.time(state)[b])
         gd = float(np.max(np.linalg.norm(state.goal[b] - state.pos[b], axis=-1)))
         status = text or f"{self.scenario_name}  t={t:.1f} s  formation error {state.err[b]:.3f} m  goal {gd:.2f} m"
         d = self.d
@@ -570,7 +628,7 @@ class Engine:
     @staticmethod
     def concat(states: Sequence[EngineState]) -> EngineState:
         """Join states along the batch dim (e.g. B = 1 resets into one batch), in order."""
-        columns = zip(*(s[:-1] for s in states), strict=True)  # each field but params, over the states
+        columns = [[getattr(s, f) for s in states] for f in _FIELDS]  # each field but params, over the states
         fields = {f: None if x[0] is None else np.concatenate(x) for f, x in zip(_FIELDS, columns, strict=True)}
         return _frozen(fields, {kk: np.concatenate([s.params[kk] for s in states]) for kk in states[0].params})
 
@@ -578,7 +636,7 @@ class Engine:
     def select(state: EngineState, index: ArrayLike) -> EngineState:
         """The sub-batch ``index`` of ``state`` (for tests and vectorised resets)."""
         idx = np.atleast_1d(np.asarray(index))
-        values: tuple[Any, ...] = state[:-1]
+        values = [getattr(state, f) for f in _FIELDS]
         fields = {f: None if v is None else v[idx] for f, v in zip(_FIELDS, values, strict=True)}
         return _frozen(fields, {kk: vv[idx] for kk, vv in state.params.items()})
 
@@ -593,8 +651,25 @@ class Engine:
             out[rows] = val
             return out
 
-        fields = {f: put(v, w) for f, v, w in zip(_FIELDS, state[:-1], new[:-1], strict=True)}
+        fields = {f: put(getattr(state, f), getattr(new, f)) for f in _FIELDS}
         return _frozen(fields, {kk: put(vv, new.params[kk]) for kk, vv in state.params.items()})
+
+
+def _checked_network(network: Any, follower_law: str) -> Network | None:
+    """``network`` as a Network (or None); errors name ``network``; a law it does not apply to is refused with
+    the core's reason (``core.network.check_network_law``)."""
+    try:
+        net = check_network(network)
+    except (TypeError, ValueError) as exc:
+        raise type(exc)(f"network: {exc}") from None
+    if net is not None and follower_law not in NETWORK_LAWS:
+        try:
+            check_network_law(follower_law)
+        except FormationError as exc:
+            raise FormationError(
+                f"{exc}. Pass follower_law='linear' (or 'stationary' with single_integrator dynamics) with network="
+            ) from None
+    return net
 
 
 def _frozen(fields: dict[str, Any], params: dict[str, Array]) -> EngineState:

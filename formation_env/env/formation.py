@@ -28,7 +28,7 @@ def neutral_info(goal_distance: float, formation_error: float) -> StepInfo:
     """An info dict with every step key at its neutral value (for ``reset``: nothing happened yet)."""
     values: dict[str, Any] = {"success": False, "collision": False, "out_of_bounds": False}
     values.update(formation_error=formation_error, min_clearance=float("inf"), goal_distance=goal_distance)
-    values.update(time=0.0, control_effort=0.0)
+    values.update(time=0.0, control_effort=0.0, lost_fraction=0.0)
     assert set(values) == set(INFO_KEYS)
     return StepInfo(values)
 
@@ -163,13 +163,16 @@ class FormationEnv(SingleEnv, ParallelEnv, EzPickle):
 
         ``formation_v0.parallel_env(scenario="narrow_passage", dynamics="double_integrator",
         follower_law="dynamic", dt=0.1, max_cycles=400, render_mode=None, **kwargs)`` with the keyword
-        arguments of :class:`~formation_env.env.engine.Engine` (``framework``, ``omega``, ``u_max``, ...) and the
-        scenario's own (e.g. ``gap_width``); unknown ones raise TypeError. ``stationary`` needs single integrators.
+        arguments of :class:`~formation_env.env.engine.Engine` (``framework``, ``omega``, ``u_max``, ``network``,
+        ...) and the scenario's own (e.g. ``gap_width``); unknown ones raise TypeError. ``stationary`` needs single
+        integrators. ``network`` (a ``core.network.Network`` or a dict of its fields) puts delay, packet loss,
+        jitter or quantisation between the agents (follower_law ``linear`` or ``stationary``; docs/networks.md).
 
         Info per agent per step (a fresh dict; ``reset`` gives every key with its neutral value): ``success``,
         ``collision``, ``out_of_bounds`` (bool), ``formation_error``, ``min_clearance`` (m; smallest agent-agent
         or agent-obstacle gap between surfaces), ``goal_distance`` (m; largest agent distance to its goal
-        position), ``time`` (s), ``control_effort`` (|u_i|^2 of this leader's applied input).
+        position), ``time`` (s), ``control_effort`` (|u_i|^2 of this leader's applied input), ``lost_fraction``
+        (the share of the link samples into the followers lost since the reset; 0.0 without loss).
 
         ## Version History
 

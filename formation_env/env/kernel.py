@@ -1,7 +1,8 @@
 """The compiled step: one numba implementation of a step, composed per engine from its components.
 
 A step runs environment by environment (row b) through its *parts* (:data:`PARTS`, in order): ``law`` (the
-followers' law and the dynamics), ``capsules`` (every obstacle at the step's time), ``contacts``, ``goal``,
+followers' law and the dynamics; ``network`` in its place in an engine with a communication network,
+:mod:`~formation_env.env.network`), ``capsules`` (every obstacle at the step's time), ``contacts``, ``goal``,
 ``judge`` (goal distances, affine fit, success, the episode's end) and, when a component reads it, ``route``;
 then the engine's reward terms fill the rewards and its observation blocks the observations. Each part declares
 the arrays it writes; every array of the step is declared once, in :data:`ARRAYS` (name, shape, unit, the part
@@ -42,6 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._numba import jit, source_stamp
+from .network import clip_actions, kinematics, network_row
 from .obstacles import path_clearance, point_clearance
 
 __all__ = [
@@ -50,6 +52,7 @@ __all__ = [
     "ArraySpec",
     "Consts",
     "Episode",
+    "NetConsts",
     "Outputs",
     "Part",
     "array_table",
@@ -97,6 +100,27 @@ class Consts(NamedTuple):
     n_nearest: int
     k_nearest: int
     end_on_success: bool
+
+
+class NetConsts(NamedTuple):
+    """The network's constants (:data:`ARRAYS`, written by ``engine``), an argument of a networked step only."""
+
+    followers: Ints
+    net_recv: Ints
+    net_send: Ints
+    net_w: Array
+    net_row: Ints
+    net_gain: Array
+    zoh_a: Array
+    zoh_b: Array
+    dyn_a: Array
+    dyn_b: Array
+    zoh_kind: int
+    loss: float
+    hold: bool
+    quant: int
+    quant_step: float
+    jitter: Array
 
 
 class Episode(NamedTuple):
@@ -148,6 +172,7 @@ class ArraySpec(NamedTuple):
 
 # fmt: off
 _E = "np.empty"
+_LAW = "law, network"
 #: Every array of the step, in the order of the step's arguments (the ``state`` ones) and outputs (``out``).
 ARRAYS: tuple[ArraySpec, ...] = (
     # the state before the step (the step's inputs; in observe, the state itself)
@@ -163,18 +188,30 @@ ARRAYS: tuple[ArraySpec, ...] = (
               state="goal_dist"),
     ArraySpec("streak0", "(B,)", "samples", "state", "consecutive samples at the goal", observe="state",
               state="streak"),
+    ArraySpec("sent0", "(B, d_n, n, q)", "state", "state", "network: what every agent sent at k - 1, ..., k - d "
+              "(neighbours delay; else (0, 0, 0, 0))", observe="state", state="net_sent"),
+    ArraySpec("corr0", "(B, d_i, n_f, q)", "state", "state", "network: the corrections c(k - 1), ..., c(k - d) "
+              "(input delay; else (0, 0, 0, 0))", observe="state", state="net_corr"),
+    ArraySpec("held0", "(B, m_h, q)", "state", "state", "network: the value each link j -> i holds (hold model; "
+              "else (0, 0, 0))", observe="state", state="net_held"),
+    ArraySpec("rng0", "(B, 4)", "1", "state", "network: each copy's PCG64 generator state (uint64 words; else "
+              "(0, 4))", observe="state", state="net_rng"),
+    ArraySpec("lost0", "(B,)", "samples", "state", "network: link samples lost since the reset (else (0,))",
+              observe="state", state="net_lost"),
+    ArraySpec("time0", "(B,)", "s", "state", "network with jitter: the env time, the sum of the drawn periods (else "
+              "(0,): t = k T)", observe="state", state="net_time"),
     # law and dynamics
-    ArraySpec("act", "(B, n_l, p)", "1", "law", "the leaders' actions, clipped to [-1, 1]", observe="zeros"),
-    ArraySpec("effort", "(B, n_l)", "input^2", "law", "u_i . u_i, the squared input of each leader (u = u_max a)",
+    ArraySpec("act", "(B, n_l, p)", "1", _LAW, "the leaders' actions, clipped to [-1, 1]", observe="zeros"),
+    ArraySpec("effort", "(B, n_l)", "input^2", _LAW, "u_i . u_i, the squared input of each leader (u = u_max a)",
               "np.zeros((B, n_l))", observe="", out=True),
-    ArraySpec("x", "(B, n, q)", "state", "law", "agent states after the step",
-              "np.empty(x0.shape) if law.shape[0] else x_in", observe="state", out=True),
-    ArraySpec("mem", "(B, n_f, p)", "input", "law", "follower-law memory after the step",
-              "np.empty(mem0.shape) if law.shape[0] else mem_in", observe="state", out=True),
-    ArraySpec("pos", "(B, n, d)", "m", "law", "positions after the step", f"{_E}(pos0.shape)", "state", True),
-    ArraySpec("vel", "(B, n, d)", "m/s", "law", "velocities (C A x, or the change of position over T)",
+    ArraySpec("x", "(B, n, q)", "state", _LAW, "agent states after the step",
+              "x_in if x_in.size else np.empty(x0.shape)", observe="state", out=True),
+    ArraySpec("mem", "(B, n_f, p)", "input", _LAW, "follower-law memory after the step",
+              "mem_in if x_in.size else np.empty(mem0.shape)", observe="state", out=True),
+    ArraySpec("pos", "(B, n, d)", "m", _LAW, "positions after the step", f"{_E}(pos0.shape)", "state", True),
+    ArraySpec("vel", "(B, n, d)", "m/s", _LAW, "velocities (C A x, or the change of position over the period)",
               f"{_E}(pos0.shape)", "state", True),
-    ArraySpec("k", "(B,)", "samples", "law", "samples taken after the step", f"{_E}(B, np.int64)", "state", True),
+    ArraySpec("k", "(B,)", "samples", _LAW, "samples taken after the step", f"{_E}(B, np.int64)", "state", True),
     # obstacles
     ArraySpec("cur_a", "(B, m, d)", "m", "capsules", "every capsule's axis start at t = k T (static, then each "
               "moving type's)", f"{_E}((B, m, d))"),
@@ -209,6 +246,21 @@ ARRAYS: tuple[ArraySpec, ...] = (
     ArraySpec("route0", "(B, n)", "m", "route", "each agent's route length to its goal before the step (the "
               "scenario's route_row)", f"{_E}((B, n))"),
     ArraySpec("route1", "(B, n)", "m", "route", "route lengths after the step", f"{_E}((B, n))"),
+    # the network (instead of the law's map, when the engine has one)
+    ArraySpec("sent", "(B, d_n, n, q)", "state", "network", "what was sent at k, ..., k - d + 1",
+              f"{_E}(sent0.shape)", observe="", out=True),
+    ArraySpec("corr", "(B, d_i, n_f, q)", "state", "network", "the corrections c(k), ..., c(k - d + 1)",
+              f"{_E}(corr0.shape)", observe="", out=True),
+    ArraySpec("held", "(B, m_h, q)", "state", "network", "the value each link holds after the step",
+              f"{_E}(held0.shape)", observe="", out=True),
+    ArraySpec("rng", "(B, 4)", "1", "network", "each copy's generator state after the step's draws",
+              f"{_E}(rng0.shape, np.uint64)", observe="", out=True),
+    ArraySpec("lost", "(B,)", "samples", "network", "link samples lost since the reset, after the step",
+              f"{_E}(lost0.shape, np.int64)", observe="", out=True),
+    ArraySpec("period", "(B,)", "s", "network", "the sample's period T_k (drawn under jitter, else T)",
+              f"{_E}(lost0.shape[0])", observe="", out=True),
+    ArraySpec("time", "(B,)", "s", "network", "under jitter, the env time after the step (else (0,))",
+              f"{_E}(time0.shape)", observe="", out=True),
     # the engine's constants
     ArraySpec("leaders", "(n_l,)", "index", "engine", "the leaders' agent indices"),
     ArraySpec("others", "(n_l, n_l - 1)", "index", "engine", "the other leaders of each (leader indices)"),
@@ -240,6 +292,23 @@ ARRAYS: tuple[ArraySpec, ...] = (
     ArraySpec("n_nearest", "scalar", "1", "engine", "nearest obstacles sensed in 3D"),
     ArraySpec("k_nearest", "scalar", "1", "engine", "agents in the nearest_agents block"),
     ArraySpec("end_on_success", "scalar", "bool", "engine", "success ends the episode"),
+    ArraySpec("followers", "(n_f,)", "index", "engine", "network: the followers' agent indices (else (0,))"),
+    ArraySpec("net_recv", "(m_l,)", "index", "engine", "network: each directed link j -> i's receiver i "
+              "(core.network.network_links order)"),
+    ArraySpec("net_send", "(m_l,)", "index", "engine", "network: each link's sender j (leaders send too)"),
+    ArraySpec("net_w", "(m_l,)", "1/m^2", "engine", "network: each link's weight Omega_ij"),
+    ArraySpec("net_row", "(m_l,)", "index", "engine", "network: each link's receiver's row in followers"),
+    ArraySpec("net_gain", "(p, q)", "1", "engine", "network: the law's gain G (u_i = G c_i): eps K"),
+    ArraySpec("zoh_a", "(q, q)", "1", "engine", "network: A_d at the nominal T"),
+    ArraySpec("zoh_b", "(q, p)", "1", "engine", "network: B_d at the nominal T"),
+    ArraySpec("dyn_a", "(q, q)", "1/s", "engine", "network: the continuous A (the ZOH at a drawn period)"),
+    ArraySpec("dyn_b", "(q, p)", "1", "engine", "network: the continuous B"),
+    ArraySpec("zoh_kind", "scalar", "1", "engine", "network: the ZOH at the period: 0 nominal, 1 (I, T B), 2 expm"),
+    ArraySpec("loss", "scalar", "1", "engine", "network: probability p that a link loses a sample"),
+    ArraySpec("hold", "scalar", "bool", "engine", "network: a lost sample keeps the last value received"),
+    ArraySpec("quant", "scalar", "1", "engine", "network: quantiser of what is sent: 0 none, 1 uniform, 2 log"),
+    ArraySpec("quant_step", "scalar", "state", "engine", "network: the uniform step delta, or the log density rho"),
+    ArraySpec("jitter", "(2,) or (0,)", "s", "engine", "network: (T_min, T_max) of the drawn periods, or none"),
     # the episodes' arrays
     ArraySpec("pvec", "(B, k)", "scenario's", "reset", "the scenario's episode parameters (its param_vector)"),
     ArraySpec("cap_a", "(B, m_s, d)", "m", "reset", "static capsules' axis starts (made at the reset)"),
@@ -250,9 +319,9 @@ ARRAYS: tuple[ArraySpec, ...] = (
 )
 # fmt: on
 SPECS: dict[str, ArraySpec] = {a.name: a for a in ARRAYS}
-if set(Consts._fields) != {a.name for a in ARRAYS if a.writer == "engine"} or set(Episode._fields) != {
-    a.name for a in ARRAYS if a.writer == "reset"
-}:  # pragma: no cover  (a declaration out of step with the records)
+if set(Consts._fields) | set(NetConsts._fields) != {a.name for a in ARRAYS if a.writer == "engine"} or set(
+    Episode._fields
+) != {a.name for a in ARRAYS if a.writer == "reset"}:  # pragma: no cover  (a declaration out of step with the records)
     raise RuntimeError("kernel.ARRAYS must declare every field of Consts (engine) and Episode (reset)")
 
 #: What the step returns of its arrays, in :data:`ARRAYS` order (the compiled step returns a plain tuple, since
@@ -260,6 +329,20 @@ if set(Consts._fields) != {a.name for a in ARRAYS if a.writer == "engine"} or se
 Outputs = namedtuple("Outputs", [a.name for a in ARRAYS if a.out])  # type: ignore[misc]
 #: The state arrays, the step's inputs after ``c`` and ``ep``.
 STATE_INPUTS: tuple[ArraySpec, ...] = tuple(a for a in ARRAYS if a.writer == "state")
+#: The arrays only a networked step has (its state inputs and outputs): a step without a network neither takes
+#: nor returns them, nor ``NetConsts``, so it costs what it cost before networks existed.
+NETWORK_ONLY: frozenset[str] = frozenset(
+    a.name for a in ARRAYS if a.writer == "network" or (a.writer == "state" and a.state.startswith("net_"))
+)
+#: The outputs of a step without a network (the first fields of ``Outputs``; the network's follow).
+NOMINAL_OUTPUTS: tuple[str, ...] = tuple(f for f in Outputs._fields if f not in NETWORK_ONLY)
+if Outputs._fields[: len(NOMINAL_OUTPUTS)] != NOMINAL_OUTPUTS:  # pragma: no cover
+    raise RuntimeError("kernel.ARRAYS must declare the network's outputs after every other output")
+
+
+def step_inputs(network: bool) -> tuple[ArraySpec, ...]:
+    """The state arrays a composed step takes (the network's only when it has one), in argument order."""
+    return tuple(a for a in STATE_INPUTS if network or a.name not in NETWORK_ONLY)
 
 
 # ---------------------------------------------------------------------------- the parts of a row
@@ -326,13 +409,7 @@ def move_row(  # pragma: no cover
 ) -> None:  # fmt: skip
     """The law and the dynamics of env b: clipped actions, [x', mem'] = [x, u_max a, mem] M, positions C x',
     velocities (C A x' or the change of position over T), the sample count."""
-    n_l, p = act.shape[1], act.shape[2]
-    for i in range(n_l):
-        e = 0.0
-        for j in range(p):
-            act[b, i, j] = min(max(act[b, i, j], -1.0), 1.0)
-            e += (u_max * act[b, i, j]) ** 2
-        effort[b, i] = e
+    clip_actions(b, act, effort, u_max)
     if law.shape[0]:
         z = np.concatenate((x0[b].ravel(), u_max * act[b].ravel(), mem0[b].ravel()))
         out = np.zeros(law.shape[1])
@@ -343,21 +420,7 @@ def move_row(  # pragma: no cover
         nx = x0.shape[1] * x0.shape[2]
         x[b] = out[:nx].reshape(x.shape[1:])
         mem[b] = out[nx:].reshape(mem.shape[1:])
-    n, q, d = x.shape[1], x.shape[2], pos.shape[2]
-    for i in range(n):
-        for c in range(d):
-            acc = 0.0
-            for j in range(q):
-                acc += x[b, i, j] * c_t[j, c]
-            pos[b, i, c] = acc
-            if ca_t.shape[0]:
-                acc = 0.0
-                for j in range(q):
-                    acc += x[b, i, j] * ca_t[j, c]
-                vel[b, i, c] = acc
-            else:
-                vel[b, i, c] = (acc - pos0[b, i, c]) / dt
-    k[b] = k0[b] + 1
+    kinematics(b, x, c_t, ca_t, pos0, pos, vel, dt, k0, k)
 
 
 @jit
@@ -532,6 +595,10 @@ _JUDGED = ("flags:at_goal", "flags:success", "flags:terminated", "flags:truncate
 PARTS: tuple[Part, ...] = (
     Part("law", ("act", "effort", "x", "mem", "pos", "vel", "k"), None,
          "clipped actions, [x', mem'] = [x, u_max a, mem] M, positions, velocities, the sample count", (move_row,)),
+    Part("network", ("act", "effort", "x", "mem", "pos", "vel", "k", "sent", "corr", "held", "rng", "lost", "period",
+                     "time"), None,
+         "instead of law, with a network: draws, what is sent and received, u_f = G c, every agent's ZOH over the "
+         "period (env.network)", (network_row,)),
     Part("capsules", ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
          ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
          "the static capsules, then each moving type's row at t and at t - T"),
@@ -547,6 +614,13 @@ PARTS: tuple[Part, ...] = (
 )  # fmt: skip
 PART_NAMES = tuple(p.name for p in PARTS)
 _OPTIONAL = ("route",)  # parts that run only when a component reads what they write
+#: The part that takes the place of another in an engine with a network (and is left out without one).
+_INSTEAD = {"network": "law"}
+
+
+def _left_out(network: bool) -> frozenset[str]:
+    """The parts an engine does not compose: ``network`` without a network, else ``law``."""
+    return frozenset(_INSTEAD.values()) if network else frozenset(_INSTEAD)
 
 
 def _target_array(target: str) -> str:
@@ -591,7 +665,12 @@ def array_table() -> str:
 _COMPOSED: dict[str, Any] = {}
 #: Names a part's line may use beside the arrays: the row, the observation buffers, the rewards, a pose.
 _LOCALS = ("b", "buf", "obs", "noise", "rew", "pose")
-_INPUTS = ("c", "ep", *(a.name for a in STATE_INPUTS), "act", "x_in", "mem_in", "noise")
+
+
+def _inputs(network: bool) -> tuple[str, ...]:
+    """The composed step's parameters: constants (and the network's), episode, state, actions, law, noise."""
+    return ("c", *(("nc",) if network else ()), "ep", *(a.name for a in step_inputs(network)), "act", "x_in",
+            "mem_in", "noise")  # fmt: skip
 
 
 def _name(fn: Any) -> tuple[str, str]:
@@ -643,8 +722,14 @@ def _reads(lines: Sequence[str]) -> set[str]:
 class _Composer:
     """The source of one engine's step and observe (see :func:`compose`)."""
 
-    def __init__(self, moving: Sequence[Any], pose: Any, route: Any, alias: Callable[[Any], str]) -> None:
+    def __init__(
+        self, moving: Sequence[Any], pose: Any, route: Any, alias: Callable[[Any], str], timed: bool = False
+    ) -> None:
         self.moving, self.pose, self.route, self.alias = list(moving), pose, route, alias
+        #: The env time of the sample and of the one before: k T, or the sum of the drawn periods (jitter).
+        self.now = "time[b]" if timed else "k[b] * dt"
+        self.before = "time0[b]" if timed else "(k[b] - 1) * dt"
+        self.at_state = "time0[b]" if timed else "k[b] * dt"
 
     def part_lines(self, part: str, observe: bool) -> list[str]:
         decl = PARTS[PART_NAMES.index(part)]
@@ -655,7 +740,8 @@ class _Composer:
             lines = [call(static_capsules)]
             for j, row in enumerate(self.moving):
                 nm, sl = self.alias(row), f"[b, m{j}:m{j + 1}]"
-                for t, pre in (("k[b] * dt", "cur"), ("k[b] * dt" if observe else "(k[b] - 1) * dt", "old")):
+                now = self.at_state if observe else self.now
+                for t, pre in ((now, "cur"), (self.at_state if observe else self.before, "old")):
                     lines.append(f"{nm}(mov_p{j}[b], {t}, bounds, {pre}_a{sl}, {pre}_e{sl}, {pre}_r{sl})")
             return lines
         if part == "goal":
@@ -664,9 +750,9 @@ class _Composer:
             nm = self.alias(self.pose)
             return [
                 "pose = np.empty((d, d + 1))",
-                f"{nm}(goal_p[b], k[b] * dt, pose)",
+                f"{nm}(goal_p[b], {self.now}, pose)",
                 "affine_into(r, pose, goal[b])",
-                f"{nm}(goal_p[b], (k[b] + 1) * dt, pose)",
+                f"{nm}(goal_p[b], {self.now} + dt, pose)",
                 "affine_into(r, pose, gvel[b])",
                 "gvel[b] = (gvel[b] - goal[b]) / dt",
             ]
@@ -677,10 +763,12 @@ class _Composer:
         raise KeyError(part)  # pragma: no cover
 
 
-def _writers(observe: bool) -> dict[str, list[str]]:
-    """array name -> the parts that write it (in step order) in the step or in observe."""
+def _writers(observe: bool, left_out: frozenset[str] = frozenset()) -> dict[str, list[str]]:
+    """array name -> the parts that write it (in step order) in the step or in observe (but ``left_out``)."""
     out: dict[str, list[str]] = {}
     for part in PARTS:
+        if part.name in left_out:
+            continue
         targets = part.observe if observe else (part.writes if part.name != "fit" else None)
         for target in targets or ():
             out.setdefault(_target_array(target), [])
@@ -689,10 +777,12 @@ def _writers(observe: bool) -> dict[str, list[str]]:
     return out
 
 
-def _schedule(wanted: set[str], observe: bool, composer: _Composer, always: Sequence[str]) -> list[str]:
+def _schedule(
+    wanted: set[str], observe: bool, composer: _Composer, always: Sequence[str], left_out: frozenset[str] = frozenset()
+) -> list[str]:
     """The parts to run, in step order: ``always`` and the writers of the ``wanted`` arrays, with the parts they
-    read in turn."""
-    writers = _writers(observe)
+    read in turn (never the ``left_out`` ones)."""
+    writers = _writers(observe, left_out)
     chosen = set(always)
     todo = [w for nm in wanted for w in writers.get(nm, [])]
     while todo:
@@ -768,6 +858,8 @@ def compose(
     route: Any = None,
     moving: Sequence[Any] = (),
     pose: Any = None,
+    network: bool = False,
+    timed: bool = False,
 ) -> Any:
     """The compiled module of an engine's components: ``step``, ``step_parallel`` and ``observe``.
 
@@ -776,7 +868,9 @@ def compose(
     when a component reads ``route0`` or ``route1``; None: :func:`straight_route`); ``moving``: the rows of the
     scenario's moving obstacle types ``row(p (M, w), t, bounds, a (M, d), e (M, d), rad (M,))``, in capsule order;
     ``pose``: the scenario's ``pose_row(goal_p (w,), t, out (d, d + 1))`` of a moving goal, or None (a static
-    goal). Each component's parameters are named after the step's arrays (:func:`call`).
+    goal). Each component's parameters are named after the step's arrays (:func:`call`). ``network``: the
+    ``network`` part (:mod:`~formation_env.env.network`) takes the place of ``law``; without it the step has no
+    network part at all. ``timed``: the env time is the sum of the drawn periods (``time``, jitter), not k T.
 
     Raises TypeError naming the component when it names no array of the step, or when a block reads an array that
     ``observe`` does not have (:data:`ARRAYS`: ``observe``). The source is written to a cache folder
@@ -790,7 +884,7 @@ def compose(
     aliases: dict[int, str] = {}
     for fn in funcs:
         aliases.setdefault(id(fn), re.sub(r"\W", "_", _name(fn)[1]) + f"_fn{len(aliases)}")
-    composer = _Composer(moving, pose, route, lambda fn: aliases[id(fn)])
+    composer = _Composer(moving, pose, route, lambda fn: aliases[id(fn)], timed)
     term_lines = [_component("reward term", nm, fn, {"out": "rew[b]", "w": f"weights[{i}]"}, aliases[id(fn)])
                   for i, (nm, fn) in enumerate(terms)]  # fmt: skip
     block_lines = [_component("observation block", nm, fn, {"out": "buf[b]", "lo": str(lo)}, aliases[id(fn)])
@@ -805,8 +899,9 @@ def compose(
             )
     obs_lines = [*block_lines, call(finish_obs)]
     wanted = _reads(term_lines + block_lines)
-    always = [p for p in PART_NAMES if p not in _OPTIONAL and p != "fit"]
-    step_parts = _schedule(wanted, False, composer, always)
+    left_out = _left_out(network)
+    always = [p for p in PART_NAMES if p not in _OPTIONAL and p != "fit" and p not in left_out]
+    step_parts = _schedule(wanted, False, composer, always, left_out)
     observe_parts = _schedule(_reads(block_lines) | {"theta"}, True, composer, ["fit"])
     _check_writers(step_parts, False, "step")
     _check_writers(observe_parts, True, "observe")
@@ -814,13 +909,13 @@ def compose(
     observe_row = [line for p in observe_parts for line in composer.part_lines(p, True)] + obs_lines
     step_alloc, observe_alloc = _alloc(step_row, step_parts, False), _alloc(observe_row, observe_parts, True)
     src = _TEMPLATE.format(
-        inputs=", ".join(_INPUTS),
+        inputs=", ".join(_inputs(network)),
         head=_head([*step_row, *observe_row, step_alloc, observe_alloc], len(moving)),
         step_alloc=step_alloc,
         observe_alloc=observe_alloc,
         step_row="\n".join("        " + line for line in step_row),
         observe_row="\n".join("        " + line for line in observe_row),
-        outputs=", ".join(Outputs._fields),
+        outputs=", ".join(Outputs._fields if network else NOMINAL_OUTPUTS),
     )
     part_rows = {fn.__name__: fn for part in PARTS for fn in (*part.rows, *(part.observe_rows or ()))}
     kernel_funcs = [affine_into, finish_obs, static_capsules, static_goal, *part_rows.values()]
@@ -837,6 +932,7 @@ def _head(lines: Sequence[str], n_moving: int) -> str:
     used = _reads(lines) | {"obs_low", "cap_r"}
     out = ["B, n, d = pos0.shape", "n_l = act.shape[1]", "D = obs_low.shape[0]"]
     out = [f"{nm} = c.{nm}" for nm in Consts._fields if nm in used] + out
+    out += [f"{nm} = nc.{nm}" for nm in NetConsts._fields if nm in used]
     out += [f"{nm} = ep.{nm}" for nm in Episode._fields if nm in used]
     out += [f"mov_p{j} = ep.mov_p[{j}]" for j in range(n_moving)]
     out += ["m0 = cap_r.shape[1]"] + [f"m{j + 1} = m{j} + mov_p{j}.shape[1]" for j in range(n_moving)]
@@ -850,7 +946,7 @@ def _alloc(lines: Sequence[str], parts: Sequence[str], observe: bool) -> str:
     names = {_target_array(t) for p in PARTS if p.name in parts for t in ((p.observe if observe else p.writes) or ())}
     names |= _reads(lines) & {a.name for a in ARRAYS if a.writer not in ("state", "engine", "reset")}
     if not observe:
-        names |= set(Outputs._fields)
+        names |= set(Outputs._fields) - (NETWORK_ONLY if "network" not in parts else frozenset())
     out = []
     for spec in ARRAYS:
         if spec.name not in names or spec.name == "act":

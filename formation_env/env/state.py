@@ -29,6 +29,14 @@ class EngineState(NamedTuple):
         streak: consecutive successful samples, shape (B,) int.
         params: per-episode arrays (B, ...): the scenario's (goal pose, obstacles under their types' keys, its
             own parameters) and derived ones (keys starting with "_"), all read-only.
+        net_sent: with a network (else None, as the four below): what every agent sent at k - 1, ..., k - d,
+            shape (B, d, n, q) (neighbours delay; d = 0 otherwise).
+        net_corr: the corrections c(k - 1), ..., c(k - d), shape (B, d, n_f, q) (input delay; d = 0 otherwise).
+        net_held: the value each directed link j -> i holds, shape (B, m, q) (hold model; m = 0 otherwise), links
+            in ``core.network.network_links`` order.
+        net_rng: each copy's PCG64 generator state, shape (B, 4) uint64 (``env.network``).
+        net_lost: link samples lost since the reset, shape (B,) int.
+        net_time: under jitter, the env time (s), the sum of the drawn periods, shape (B,) (else None: t = k T).
     """
 
     x: Array
@@ -42,6 +50,12 @@ class EngineState(NamedTuple):
     err: Array
     streak: NDArray[np.int64]
     params: dict[str, Array]
+    net_sent: Array | None = None
+    net_corr: Array | None = None
+    net_held: Array | None = None
+    net_rng: NDArray[np.uint64] | None = None
+    net_lost: NDArray[np.int64] | None = None
+    net_time: Array | None = None
 
     @property
     def batch_size(self) -> int:

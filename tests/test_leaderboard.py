@@ -184,12 +184,20 @@ def test_recipe_run_is_reproducible_and_the_leaderboard_reads_it(tmp_path: Path,
 
 
 def test_readme_shows_the_leaderboards_table() -> None:
+    """The README holds docs/leaderboard.md's summary table and, once the robustness view has run, its table."""
+    from train.leaderboard import ROBUSTNESS_HEADING
+
     root = Path(__file__).resolve().parent.parent
     doc = (root / "docs" / "leaderboard.md").read_text()
-    table = doc.split("## Summary", 1)[1].strip().splitlines()
+    table = doc.split("## Summary", 1)[1].split("\n## ", 1)[0].strip().splitlines()
     assert table[0].startswith("| scenario |") and len(table) == 2 + len(REGISTRY)
     readme = (root / "README.md").read_text()
     assert "\n".join(table) in readme
+    robust = doc.split(ROBUSTNESS_HEADING, 1)[1] if ROBUSTNESS_HEADING in doc else ""
+    for line in robust.splitlines():  # every planner row of the section stands in the README's table
+        if line.startswith("| analytic |"):
+            cells = line.split("|")[2:-1]
+            assert any(row.split("|")[3:-1] == cells for row in readme.splitlines()), line
 
 
 SHIPPED = sorted(Path("agents/pretrained").glob("*_config.json"))

@@ -73,7 +73,6 @@ NETWORKS: dict[str, dict[str, Any] | None] = {
     "ideal": None,
     "delay2": {"delay": 2},
     "loss20": {"loss": 0.2},
-    "loss50": {"loss": 0.5},
     "jitter": {"jitter": [0.05, 0.15]},
     "quantise": {"quantise": ["uniform", 0.05]},
 }

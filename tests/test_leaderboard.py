@@ -328,3 +328,26 @@ def test_robustness_section_and_table_are_written_beside_the_board(
     doc = (tmp_path / "docs" / "leaderboard.md").read_text()
     assert doc.startswith(new_page) and doc.count(ROBUSTNESS_HEADING) == 1 and "| ppo_commander | 0.90" in doc
     assert "| hold | 1 |" in (tmp_path / "README.md").read_text()
+
+
+def test_network_view_runs_every_entry_over_the_network_with_the_distributed_law(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``leaderboard(network=...)``: each entry's suite runs with the condition's network and ``NETWORK_LAW`` over
+    the policy's own arguments; the entries trained under a network join; a bad name is refused."""
+    from train import leaderboard as lb
+
+    seen: list[dict] = []
+    real = lb.evaluate_suite
+
+    def spy(spec, scenario, *args, **kw):  # type: ignore[no-untyped-def]
+        seen.append(kw.get("env_kwargs"))
+        return real(spec, scenario, *args, **kw)
+
+    monkeypatch.setattr(lb, "evaluate_suite", spy)
+    board = lb.leaderboard(2, 0, tmp_path, ["hold"], network="loss20")
+    assert board["network"] == "loss20" and set(lb.NETWORK_TRAINED) <= set(board["scenarios"]["hold"])
+    assert seen == [{"follower_law": "linear", "network": {"loss": 0.2}}] * 2  # random and analytic
+    assert board["scenarios"]["hold"]["analytic"]["metrics"]["success_rate"] == 1.0
+    with pytest.raises(ValueError, match="network must be one of"):
+        lb.leaderboard(2, 0, tmp_path, ["hold"], network="lossy")

@@ -287,8 +287,9 @@ def robustness_markdown(boards: dict[str, dict[str, Any]], command: str) -> str:
         "which a per-link network does not define), so the columns differ by the network alone. Conditions "
         f"(`formation_env.core.Network`, docs/networks.md): {nets}. Cells: success / collisions / time to goal (s) "
         "over solved episodes, or the tracking error (m) on a tracking scenario; learned entries are the mean over "
-        "their training seeds. `ppo_commander_loss20`: a commander trained from scratch under `loss20` "
-        "(docs/learning.md).",
+        "their training seeds. The planners are those of the board above, tuned for the `dynamic` law and not "
+        "retuned for this one. `ppo_commander_loss20`: a commander trained from scratch under `loss20` with this law "
+        "(docs/networks.md).",
         "",
     ]
     for sc in first["scenarios"]:

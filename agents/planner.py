@@ -436,17 +436,24 @@ TUNING_GRIDS: dict[str, dict[str, list[float]]] = {
 }  # fmt: skip
 
 
-def tune(scenario: str, n_seeds: int = 256, seed0: int = 10_000) -> tuple[dict[str, Any], list[tuple[Any, ...]]]:
-    """Grid search (``TUNING_GRIDS``) of a scenario's planner on training seeds ``seed0 .. seed0 + n_seeds - 1``
-    (disjoint from the evaluation suites' seeds 0..999), scored by success rate, then collision rate, then mean
-    time to goal. Returns the best parameters and every (params, stats) row, best first."""
+def tune(
+    scenario: str,
+    n_seeds: int = 256,
+    seed0: int = 10_000,
+    env_kwargs: dict[str, Any] | None = None,
+    grid: dict[str, list[float]] | None = None,
+) -> tuple[dict[str, Any], list[tuple[Any, ...]]]:
+    """Grid search (``grid``, default ``TUNING_GRIDS[scenario]``) of a scenario's planner on training seeds ``seed0 ..
+    seed0 + n_seeds - 1`` (disjoint from the evaluation suites' seeds 0..999) in ``Engine(scenario, **env_kwargs)``
+    (e.g. another follower law or a network), scored by success rate, then collision rate, then mean time to goal.
+    Returns the best parameters and every (params, stats) row, best first."""
     import itertools
 
     from formation_env.env.engine import Engine
 
-    engine = Engine(scenario)
+    engine = Engine(scenario, **(env_kwargs or {}))
     seeds = list(range(seed0, seed0 + n_seeds))
-    grid = TUNING_GRIDS[scenario]
+    grid = TUNING_GRIDS[scenario] if grid is None else grid
     rows = []
     for values in itertools.product(*grid.values()):
         params = dict(zip(grid, values, strict=True))
@@ -455,15 +462,45 @@ def tune(scenario: str, n_seeds: int = 256, seed0: int = 10_000) -> tuple[dict[s
     return rows[0][0], rows
 
 
-if __name__ == "__main__":
+def main(argv: list[str] | None = None) -> int:
+    """``python -m agents.planner --tune SCENARIO [--env-kwargs JSON] [--grid JSON] [--suite N]``: the grid search's
+    ten best rows and the best parameters; ``--suite N`` also runs the best on the standard suite (seeds 0..N-1) in the
+    same engine."""
+    import argparse
     import json
+
+    from formation_env.core.validation import check_mapping
+
+    p = argparse.ArgumentParser(
+        prog="python -m agents.planner", description="Grid search of a scenario's planner on training seeds."
+    )
+    p.add_argument("--tune", required=True, choices=sorted(TUNING_GRIDS), help="the scenario whose planner to tune")
+    p.add_argument("--env-kwargs", default="", help='JSON engine arguments, e.g. {"follower_law": "linear"}')
+    p.add_argument("--grid", default="", help="JSON {parameter: [values]} in place of the scenario's grid")
+    p.add_argument("--seeds", type=int, default=256, help="training seeds from 10,000")
+    p.add_argument("--suite", type=int, default=0, help="then run the best on the suite's seeds 0..N-1")
+    a = p.parse_args(argv)
+    kwargs = {}
+    for flag, text in (("--env-kwargs", a.env_kwargs), ("--grid", a.grid)):
+        try:
+            kwargs[flag] = json.loads(text) if text else None
+            check_mapping(kwargs[flag], flag)
+        except (ValueError, TypeError) as exc:
+            p.error(f"{flag} must be a JSON object: {exc}")
+    best, rows = tune(a.tune, a.seeds, env_kwargs=kwargs["--env-kwargs"], grid=kwargs["--grid"])
+    for params, stats in rows[:10]:
+        print(json.dumps(params), json.dumps(stats))
+    print("best:", json.dumps(best))
+    if a.suite > 0:
+        from formation_env.env.engine import Engine
+
+        engine = Engine(a.tune, **(kwargs["--env-kwargs"] or {}))
+        stats = rollout_stats(engine, make_planner(a.tune, **best), list(range(a.suite)))
+        print(f"suite 0..{a.suite - 1}:", json.dumps(stats))
+    return 0
+
+
+if __name__ == "__main__":
     import sys
 
-    if "--tune" in sys.argv:
-        name = sys.argv[sys.argv.index("--tune") + 1] if len(sys.argv) > sys.argv.index("--tune") + 1 else ""
-        if name not in TUNING_GRIDS:
-            sys.exit(f"usage: python -m agents.planner --tune {{{','.join(TUNING_GRIDS)}}}")
-        best, rows = tune(name)
-        for p_, s_ in rows[:10]:
-            print(json.dumps(p_), json.dumps(s_))
-        print("best:", json.dumps(best))
+    sys.exit(main())

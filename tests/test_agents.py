@@ -202,3 +202,40 @@ def test_paired_difference() -> None:
     b = evaluate("analytic", "narrow_passage", 3, seed=1, generalisation=False)
     with pytest.raises(ValueError, match="not paired"):
         paired_difference(a, b)
+
+
+def test_planner_tuning_runs_in_the_engine_and_grid_given(capsys: pytest.CaptureFixture[str]) -> None:
+    """``python -m agents.planner --tune``: the grid search runs in ``Engine(scenario, **env_kwargs)`` over the grid
+    given, best first, and ``--suite N`` runs the best on the suite in the same engine; bad JSON is a usage error."""
+    from agents.planner import main, rollout_stats, tune
+
+    grid = {"kp": [2.0, 6.0], "lookahead": [1.5]}
+    kw = {"follower_law": "linear", "network": {"loss": 0.2}}
+    best, rows = tune("hold", 4, env_kwargs=kw, grid=grid)
+    assert [r[0] for r in rows] in ([{"kp": 2.0, "lookahead": 1.5}, {"kp": 6.0, "lookahead": 1.5}],
+                                    [{"kp": 6.0, "lookahead": 1.5}, {"kp": 2.0, "lookahead": 1.5}])  # fmt: skip
+    assert best == rows[0][0]
+    key = [(-s["success_rate"], s["collision_rate"], s["time_to_goal"]) for _, s in rows]
+    assert key == sorted(key)
+    engine = Engine("hold", **kw)
+    assert rows[0][1] == rollout_stats(engine, make_planner("hold", **best), list(range(10_000, 10_004)))
+    argv = [
+        "--tune",
+        "hold",
+        "--seeds",
+        "4",
+        "--grid",
+        json.dumps(grid),
+        "--env-kwargs",
+        json.dumps(kw),
+        "--suite",
+        "3",
+    ]
+    assert main(argv) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[-2] == "best: " + json.dumps(best)
+    suite = rollout_stats(engine, make_planner("hold", **best), [0, 1, 2])
+    assert out[-1] == "suite 0..2: " + json.dumps(suite)
+    with pytest.raises(SystemExit):
+        main(["--tune", "hold", "--grid", "[1, 2]"])
+    assert "--grid must be a JSON object" in capsys.readouterr().err

@@ -269,14 +269,18 @@ def _robust_cell(row: dict[str, Any] | None, timed: bool) -> str:
     return f"{m['success_rate']:.2f} / {m['collision_rate']:.2f}{tail}"
 
 
+def _describe_network(name: str) -> str:
+    fields = NETWORKS[name]
+    return "a perfect network" if fields is None else ", ".join(f"{k}={v}" for k, v in fields.items())
+
+
 def robustness_markdown(boards: dict[str, dict[str, Any]], command: str) -> str:
     """The robustness section of docs/leaderboard.md: per scenario, every entry (rows) under every condition of
     ``boards`` (condition -> :func:`leaderboard` board, columns): success / collisions / time to goal (s), or the
     tracking error (m) on a tracking scenario."""
     names = list(boards)
     first = boards[names[0]]
-    nets = "; ".join(f"`{n}`: " + ("a perfect network" if NETWORKS[n] is None else
-                                   ", ".join(f"{k}={v}" for k, v in NETWORKS[n].items())) for n in names)  # fmt: skip
+    nets = "; ".join(f"`{n}`: {_describe_network(n)}" for n in names)
     lines = [
         ROBUSTNESS_HEADING,
         "",

@@ -229,7 +229,7 @@ class Engine:
         #: The env time is the sum of the drawn periods (state ``net_time``), not k T.
         self._timed = self.network is not None and self.network.jitter is not None
         over = ""
-        if self._net is not None:
+        if self._net is not None and self.network is not None:
             from formation_env.core.analysis import network_stability
 
             net_rho = network_stability(self.law.part, dyn, self.dt, self._net.loop.G, self.network)
@@ -358,7 +358,7 @@ class Engine:
         x = start @ self._at_rest
         net: dict[str, Any] = {}
         if self._net is not None and seeds is not None:
-            params["_net_seed"] = seeds
+            params["_net_seed"] = seeds  # type: ignore[assignment]  # int64 seeds among the float params
             seeds.setflags(write=False)
             net = self._net.initial(x, seeds)
         return EngineState(

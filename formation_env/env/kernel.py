@@ -335,7 +335,8 @@ NETWORK_ONLY: frozenset[str] = frozenset(
     a.name for a in ARRAYS if a.writer == "network" or (a.writer == "state" and a.state.startswith("net_"))
 )
 #: The outputs of a step without a network (the first fields of ``Outputs``; the network's follow).
-NOMINAL_OUTPUTS: tuple[str, ...] = tuple(f for f in Outputs._fields if f not in NETWORK_ONLY)
+_OUTPUT_NAMES: tuple[str, ...] = tuple(Outputs._fields)
+NOMINAL_OUTPUTS: tuple[str, ...] = tuple(name for name in _OUTPUT_NAMES if name not in NETWORK_ONLY)
 if Outputs._fields[: len(NOMINAL_OUTPUTS)] != NOMINAL_OUTPUTS:  # pragma: no cover
     raise RuntimeError("kernel.ARRAYS must declare the network's outputs after every other output")
 

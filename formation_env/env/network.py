@@ -185,6 +185,20 @@ def _quantised(v: float, quant: int, step: float) -> float:  # pragma: no cover
 
 
 @jit
+def _delay_line(b: int, line0: Array, line: Array, new: Array) -> Array:  # pragma: no cover
+    """A delay line of env b (``line0`` (B, d, ...) before the step, ``line`` after it, newest first): pushes ``new``
+    in and returns what leaves, d samples old (``new`` itself when d = 0)."""
+    d = line0.shape[1]
+    if d == 0:
+        return new
+    out = line0[b, d - 1].copy()
+    for lag in range(d - 1, 0, -1):
+        line[b, lag] = line0[b, lag - 1]
+    line[b, 0] = new
+    return out
+
+
+@jit
 def clip_actions(b: int, act: Array, effort: Array, u_max: float) -> None:  # pragma: no cover
     """Env b's actions clipped to [-1, 1] in place, and each leader's effort |u_max a|^2."""
     for i in range(act.shape[1]):
@@ -252,14 +266,7 @@ def network_row(  # pragma: no cover
     for i in range(n):
         for j in range(q):
             s[i, j] = _quantised(x0[b, i, j], quant, quant_step)
-    d_n = sent0.shape[1]
-    if d_n:
-        avail = sent0[b, d_n - 1].copy()
-        for lag in range(d_n - 1, 0, -1):
-            sent[b, lag] = sent0[b, lag - 1]
-        sent[b, 0] = s
-    else:
-        avail = s
+    avail = _delay_line(b, sent0, sent, s)
     c = np.zeros((n_f, q))
     n_lost = 0
     for e in range(net_recv.shape[0]):
@@ -282,14 +289,7 @@ def network_row(  # pragma: no cover
         for j in range(q):
             c[row, j] += w * (avail[src, j] - x0[b, recv, j])
     lost[b] = lost0[b] + n_lost
-    d_i = corr0.shape[1]
-    if d_i:
-        used = corr0[b, d_i - 1].copy()
-        for lag in range(d_i - 1, 0, -1):
-            corr[b, lag] = corr0[b, lag - 1]
-        corr[b, 0] = c
-    else:
-        used = c
+    used = _delay_line(b, corr0, corr, c)
     a_d, b_d = zoh_at(T, zoh_kind, zoh_a, zoh_b, dyn_a, dyn_b)
     u = np.empty(p)
     for i in range(n):

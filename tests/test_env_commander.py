@@ -109,6 +109,7 @@ def test_state_blocks_append_what_the_leaders_sense():
     np.testing.assert_allclose(decoded.pos, env._state.pos, atol=1e-5)
     assert decoded.k[0] == 10
     sb3_check_env(FormationCommanderEnv(scenario="narrow_passage", state_blocks=["task", "obstacles"]), warn=True)
+    sb3_check_env(FormationCommanderEnv(scenario="obstacle_field", state_blocks=["task"]), warn=True)
     with pytest.raises(TypeError, match="state_blocks must be a sequence of block names"):
         FormationCommanderEnv(scenario="hold", state_blocks="obstacles")
     with pytest.raises(ValueError, match="state_blocks must name distinct registered blocks"):

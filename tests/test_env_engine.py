@@ -507,3 +507,80 @@ def test_first_compile_of_the_kernels_says_so_once(tmp_path) -> None:
     ]
     notice = "compiling the env's step kernels with numba"
     assert errs[0].count(notice) == 1 and notice not in errs[1]
+
+
+def _lanes_by_grid(circles, lo, hi, step=1e-4):
+    """Free lanes of the world's height [lo, hi] outside every disc's shadow on y, by marching a fine grid:
+    (centre, width) pairs, widest first."""
+    y = np.arange(lo, hi + step / 2, step)
+    free = np.all(np.abs(y[:, None] - circles[None, :, 1]) > circles[None, :, 2], axis=1)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], free.astype(int), [0]])))
+    runs = [(y[s], y[e - 1]) for s, e in zip(edges[::2], edges[1::2], strict=True)]
+    return sorted([((a + b) / 2, b - a) for a, b in runs], key=lambda cw: -cw[1])
+
+
+def test_obstacle_field_task_block_matches_a_marched_grid():
+    """The ``task`` block's lanes (``obstacle_field``) equal the free runs of a fine grid over the world's
+    height; overlapping discs, discs past the world's edge and fewer lanes than N_LANES included."""
+    from formation_env.env.scenarios.obstacle_field import N_LANES
+
+    eng = Engine("obstacle_field", observation=["position", "task"])
+    s = eng.reset(np.random.default_rng(4), 4)
+    circles = s.params["circles"].copy()
+    circles[1] = [[0.0, -1.0, 0.5], [0.2, -0.4, 0.4], [-1.0, 3.0, 0.6], [0.5, 4.8, 0.5], [0.9, 2.0, 0.3],
+                  [-0.5, -4.5, 0.6]]  # fmt: skip
+    circles[2] = [[0.0, -3.0, 2.5], [0.0, 2.5, 2.55], [0, 0, 0.3], [0, 0, 0.3], [0, 0, 0.3], [0, 0, 0.3]]
+    s.params["_pvec"] = np.ascontiguousarray(eng.scenario.param_vector({"circles": circles}))  # what the row reads
+    obs = eng.observe(s)[..., eng.observer.slices["task"]].astype(float)
+    lo_y, hi_y = eng.bounds[:, 1]
+    for b in range(4):
+        c = circles[b]
+        pos = s.pos[b]
+        b_y = eng.affine.fit(s.pos[b : b + 1])[1][0, 1]
+        half = (pos[:, 1].max() - pos[:, 1].min()) / 2 + eng.agent_radius
+        lanes = _lanes_by_grid(c, lo_y, hi_y)
+        want_lanes = []
+        for q in range(N_LANES):
+            if q < len(lanes):
+                want_lanes += [lanes[q][0] - b_y, lanes[q][1] / 2 - half]
+            else:
+                want_lanes += [0.0, -2 * (hi_y - lo_y)]
+        for i, a in enumerate(eng.leaders):
+            near, far = (c[:, 0] - c[:, 2]).min(), (c[:, 0] + c[:, 2]).max()
+            want = [near - pos[a, 0], far - pos[a, 0], *want_lanes]
+            np.testing.assert_allclose(obs[b, i], want, atol=2e-4, err_msg=f"env {b}, leader {i}")
+    with pytest.raises(FormationError, match="obstacle_field: the task observation block is defined in 2D only"):
+        Engine("obstacle_field", framework="bipyramid_3d", observation=["position", "task"])
+
+
+def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
+    """``obstacle_field``'s ``route="lane"`` (2D): round a disc through the lane with the shorter routes for
+    the whole team, never a lane narrower than LANE_WIDTH, continuous where an agent enters the field, straight
+    once past it."""
+    from formation_env.env.scenarios.obstacle_field import ROUTE_MARGIN, lane_route
+
+    assert Engine("obstacle_field", route="lane").scenario.route_row is lane_route
+    with pytest.raises(FormationError, match="obstacle_field: route must be 'straight', or 'lane' in 2D"):
+        Engine("obstacle_field", framework="bipyramid_3d", route="lane")
+
+    disc = np.array([0.0, 0.0, 1.0])  # one circle of radius 1 at the origin: lanes y < -1 and y > 1
+    room = 1.0 + 0.1 + ROUTE_MARGIN  # the disc centres' room: |y| >= room
+
+    def routes(ys, goal_ys=None, x=-4.0):
+        out = np.zeros(len(ys))
+        pos = np.stack([np.full(len(ys), x), ys], -1)
+        lane_route(disc, 0.1, pos, np.stack([np.full(len(ys), 4.0), ys if goal_ys is None else goal_ys], -1), out)
+        return out
+
+    def via(dy):  # 3 m to the field, 2 m across, 3 m to the goal, offset dy to the room's edge
+        return 2 * np.hypot(3.0, dy) + 2.0
+
+    np.testing.assert_allclose(routes(np.array([0.0, 0.3])), [via(room), via(room - 0.3)])  # above
+    np.testing.assert_allclose(routes(np.array([-0.5, 0.3])), [via(room - 0.5), via(room + 0.3)])  # below
+    for ys in ([2.0], [0.0]):  # entering the field, on and off the lane
+        before, inside = routes(np.array(ys), x=-1.0 - 1e-9)[0], routes(np.array(ys), x=-1.0 + 1e-9)[0]
+        assert before == pytest.approx(inside, abs=1e-6)
+    assert routes(np.array([2.0]), x=-1.0)[0] == pytest.approx(5.0)
+    assert routes(np.array([0.0]), x=1.5)[0] == pytest.approx(2.5)  # past the field: straight
+    disc = np.array([0.0, -0.95, 0.5, 0.0, 0.95, 0.5])  # a lane 0.9 m wide between two discs: too narrow
+    assert routes(np.array([0.0]))[0] == pytest.approx(2 * np.hypot(3.5, 1.45 + 0.15) + 1.0)

@@ -4,26 +4,138 @@ Per episode (uniform draws; ranges are keyword arguments):
 
 * World box x in [-7, 7], other axes in [-5, 5].
 * ``n_obstacles`` = 6 obstacles, centres with x in [-1.5, 1.0] and the other coordinates in
-  [-4, 4], radii in [0.3, 0.6] m; they may overlap. Start and goal regions are clear of them.
+  [-4, 4] (``obstacle_y``), radii in [0.3, 0.6] m; they may overlap. Start and goal regions are clear of them.
 * Start pose: rotation by psi0 in [-pi/12, pi/12] (3D: about z), b0 with x in [-4.5, -4], the rest
   in [-1.5, 1.5]; goal pose: rotation by psi_g in the same range, b_g with x in [4, 4.5].
 
 Gaps between obstacles are often narrower than the nominal formation: rotating, shearing or scaling it helps.
 Contact: an agent's path within ``agent_radius`` of an obstacle. Success (and its end) as in ``narrow_passage``.
+
+Task features (the optional ``task`` observation block, 2D, per leader, m). The discs' shadows on the y axis,
+[y_c - r, y_c + r], leave free lanes in the world's height, straight corridors along x that cross the field
+without meeting a disc. The block holds the field's near and far x (min x_c - r and max x_c + r) minus the
+leader's x, then, for each of the ``N_LANES`` widest lanes (widest first), its centre's y minus the formation's
+fitted b_y and the room left in it: half its width minus the team's half-height with the discs (negative: the
+formation must shrink to pass). A missing lane reads centre 0 and room -2 H (H the world's height).
+
+``route="lane"`` (2D) makes the ``approach`` reward's route go through one free lane instead of straight to the
+goal: of the lanes (unbounded in y here) at least ``LANE_WIDTH`` wide, the one whose routes sum least over the
+team. Each agent's route runs straight to the lane, along it across the field (its disc ``ROUTE_MARGIN`` from
+the lane's edges), then straight to its goal (:func:`lane_route`).
 """
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from formation_env.core.errors import FormationError
 
+from .._numba import jit
+from ..kernel import straight_route
 from ..obstacles import Circle
 from ._base import Array, Draw, EpisodeParam, Scenario, check_range, rotation_2d, rotation_3d
 
-__all__ = ["ObstacleField"]
+__all__ = ["LANE_WIDTH", "N_LANES", "ROUTE_MARGIN", "ObstacleField"]
+
+#: Lanes in the ``task`` block (the widest, widest first).
+N_LANES = 3
+
+
+#: Room (m) the ``approach`` reward's route keeps between an agent's disc and a lane's edges.
+ROUTE_MARGIN = 0.05
+#: Narrowest lane (m) the route takes: the passage's narrowest gap, which the team passes at half its height.
+LANE_WIDTH = 1.0
+
+
+@jit
+def field_lanes(circles: Array, y_lo: float, y_hi: float) -> tuple[float, float, Array, Array]:  # pragma: no cover
+    """The field of circles (C * 3,) as (x, y, r): its near and far x (min x - r, max x + r; 0 without
+    circles) and its free lanes in [y_lo, y_hi], the parts outside every circle's shadow [y - r, y + r]
+    (m), as (lane_lo, lane_hi) (m,) each, widest first."""
+    c = circles.shape[0] // 3
+    x_near, x_far = (np.inf, -np.inf) if c else (0.0, 0.0)
+    shadow_lo, shadow_hi = np.empty(c), np.empty(c)
+    for j in range(c):
+        x, y, r = circles[3 * j], circles[3 * j + 1], circles[3 * j + 2]
+        x_near, x_far = min(x_near, x - r), max(x_far, x + r)
+        shadow_lo[j], shadow_hi[j] = y - r, y + r
+    lane_lo, lane_hi = np.empty(c + 1), np.empty(c + 1)
+    m, top = 0, y_lo  # swept bottom to top
+    for j in np.argsort(shadow_lo, kind="mergesort"):
+        if shadow_lo[j] > top:
+            lane_lo[m], lane_hi[m] = top, shadow_lo[j]
+            m += 1
+        top = max(top, shadow_hi[j])
+    if y_hi > top:
+        lane_lo[m], lane_hi[m] = top, y_hi
+        m += 1
+    order = np.argsort(lane_lo[:m] - lane_hi[:m], kind="mergesort")
+    return x_near, x_far, lane_lo[order], lane_hi[order]
+
+
+@jit
+def task_row(  # pragma: no cover
+    b: int, out: Array, lo: int, leaders: NDArray[np.int64], pos: Array, pvec: Array, bfit: Array, radius: float,
+    bounds: Array,
+) -> None:  # fmt: skip
+    """The ``task`` block (the module docstring): field's near and far x minus x_i, then per lane of the
+    ``N_LANES`` widest its centre minus b_y and the room left (m). pvec = circles (C * 3,) as (x, y, r)."""
+    lo_y, hi_y = np.inf, -np.inf
+    for j in range(pos.shape[1]):
+        lo_y, hi_y = min(lo_y, pos[b, j, 1]), max(hi_y, pos[b, j, 1])
+    half = 0.5 * (hi_y - lo_y) + radius
+    x_near, x_far, lane_lo, lane_hi = field_lanes(pvec[b], bounds[0, 1], bounds[1, 1])
+    no_room = -2.0 * (bounds[1, 1] - bounds[0, 1])
+    for i, a in enumerate(leaders):
+        out[i, lo] = x_near - pos[b, a, 0]
+        out[i, lo + 1] = x_far - pos[b, a, 0]
+        for q in range(N_LANES):
+            there = q < lane_lo.shape[0]
+            out[i, lo + 2 + 2 * q] = 0.5 * (lane_lo[q] + lane_hi[q]) - bfit[b, 1] if there else 0.0
+            out[i, lo + 3 + 2 * q] = 0.5 * (lane_hi[q] - lane_lo[q]) - half if there else no_room
+
+
+@jit
+def _lane_route(x_near: float, x_far: float, y_lo: float, y_hi: float, p: Array, g: Array) -> float:  # pragma: no cover
+    """One agent's route length (m) from p to g (2,) through the lane whose disc-centre room is [y_lo, y_hi]:
+    before the field straight to (x_near, y*), y* the straight line's crossing clipped to the room, along the
+    lane to (x_far, y*), then straight to g; in the field across to y*, along, then to g; beyond, straight."""
+    if p[0] > x_far:
+        return math.hypot(g[0] - p[0], g[1] - p[1])
+    if p[0] < x_near:
+        frac = min(max((x_near - p[0]) / max(g[0] - p[0], 1e-9), 0.0), 1.0)
+        ys = min(max(p[1] + frac * (g[1] - p[1]), y_lo), y_hi)
+        return math.hypot(x_near - p[0], ys - p[1]) + (x_far - x_near) + math.hypot(g[0] - x_far, g[1] - ys)
+    ys = min(max(p[1], y_lo), y_hi)
+    return abs(ys - p[1]) + (x_far - p[0]) + math.hypot(g[0] - x_far, g[1] - ys)
+
+
+@jit
+def lane_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
+    """``route="lane"`` (2D): of the free lanes (unbounded in y) at least ``LANE_WIDTH`` wide, through the one
+    whose routes (:func:`_lane_route`) sum least over the team; straight without circles.
+    pvec = circles (C * 3,), pos, goal (n, 2) -> out (n,), m."""
+    n = pos.shape[0]
+    if pvec.shape[0] == 0:
+        straight_route(pvec, radius, pos, goal, out)
+        return
+    x_near, x_far, lane_lo, lane_hi = field_lanes(pvec, -np.inf, np.inf)
+    best = np.inf
+    for q in range(lane_lo.shape[0]):
+        if lane_hi[q] - lane_lo[q] < LANE_WIDTH:
+            continue
+        y_lo, y_hi = lane_lo[q] + radius + ROUTE_MARGIN, lane_hi[q] - radius - ROUTE_MARGIN
+        total = 0.0
+        for i in range(n):
+            total += _lane_route(x_near, x_far, y_lo, y_hi, pos[i], goal[i])
+        if total < best:
+            best = total
+            for i in range(n):
+                out[i] = _lane_route(x_near, x_far, y_lo, y_hi, pos[i], goal[i])
 
 
 class ObstacleField(Scenario):
@@ -48,6 +160,11 @@ class ObstacleField(Scenario):
         self.goal_x = check_range("goal_x", kw.pop("goal_x", (4.0, 4.5)))
         self.lateral = check_range("lateral", kw.pop("lateral", (-1.5, 1.5)))
         self.angle = check_range("angle", kw.pop("angle", (-np.pi / 12, np.pi / 12)))
+        self.route = kw.pop("route", "straight")
+        if self.route not in ("straight", "lane") or (self.route == "lane" and self.d != 2):
+            raise FormationError(
+                f"obstacle_field: route must be 'straight', or 'lane' in 2D, got {self.route!r} (d = {self.d})"
+            )
 
     def draws(self) -> list[Draw]:
         d, c = self.d, self.n_obstacles
@@ -79,6 +196,22 @@ class ObstacleField(Scenario):
             "circles": circles,
         }
         return params, (self._rotation(raw["angle0"]), b0)
+
+    task_row = staticmethod(task_row)
+
+    @property
+    def route_row(self) -> Any:
+        """The ``approach`` potential's route: :func:`lane_route` for ``route="lane"``, else straight."""
+        return lane_route if self.route == "lane" else straight_route
+
+    def task_feature_bounds(self) -> tuple[Array, Array]:
+        if self.d != 2:
+            raise FormationError("obstacle_field: the task observation block is defined in 2D only")
+        ext = self.bounds[1] - self.bounds[0]
+        lane_lo, lane_hi = np.array([-ext[1], -2.0 * ext[1]]), np.array([ext[1], ext[1]])
+        lo = np.concatenate([-ext[[0, 0]], np.tile(lane_lo, N_LANES)])
+        hi = np.concatenate([ext[[0, 0]], np.tile(lane_hi, N_LANES)])
+        return lo, hi
 
     def episode_params(self) -> list[EpisodeParam]:
         d = self.d

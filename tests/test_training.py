@@ -434,3 +434,38 @@ def test_adaptive_learning_rate_follows_each_updates_kl(tmp_path: Path, capsys: 
 
     model = PPO.load(tmp_path / "hold_commander.zip")
     assert model.learning_rate(0.0) == pytest.approx(1e-3 / 1.5**3)  # 4 updates, adapted after the first 3
+
+
+def test_fixed_statistics_map_the_bounds_onto_plus_minus_one_and_do_not_move() -> None:
+    from agents.normalization import FixedMeanStd
+
+    rms = FixedMeanStd(np.array([-4.0, 0.0, 2.0]), np.array([4.0, 1.0, 2.0]))
+    before = (rms.mean.copy(), rms.var.copy())
+    rms.update(np.random.default_rng(0).normal(50.0, 9.0, (1000, 3)))
+    np.testing.assert_array_equal(rms.mean, before[0])
+    np.testing.assert_array_equal(rms.var, before[1])
+    np.testing.assert_allclose((np.array([4.0, 0.0, 2.0]) - rms.mean) / np.sqrt(rms.var + 1e-12), [1.0, -1.0, 0.0])
+    with pytest.raises(ValueError, match="bounds: low and high must be finite"):
+        FixedMeanStd(np.array([0.0, -np.inf]), np.array([1.0, 1.0]))
+    with pytest.raises(ValueError, match="bounds: low and high must be finite"):
+        FixedMeanStd(np.array([1.0]), np.array([0.0]))
+
+
+@pytest.mark.slow
+def test_bounds_normalisation_is_kept_through_training_saving_and_acting(tmp_path: Path) -> None:
+    """``obs_norm="bounds"``: the saved statistics are the observation space's mid-points and half-ranges after
+    training, the config records the choice, and the loaded policy normalises with them; a bad name is refused."""
+    from agents.normalization import FixedMeanStd
+
+    with pytest.raises(ValueError, match=r"obs_norm must be one of \('running', 'bounds'\), got 'fixed'"):
+        train("ppo", "commander", "hold", out=tmp_path, smoke=True, obs_norm="fixed")
+    cfg = train("ppo", "commander", "hold", 512, seed=0, out=tmp_path, smoke=True, n_envs=2, obs_norm="bounds",
+                eval_episodes=1)  # fmt: skip
+    assert cfg["obs_norm"] == "bounds"
+    pol = load_policy(tmp_path / "hold_commander.zip")
+    assert isinstance(pol, LearnedPolicy) and isinstance(pol.vecnorm.obs_rms, FixedMeanStd)
+    eng = Engine("hold")
+    np.testing.assert_allclose(pol.vecnorm.obs_rms.mean, 0.5 * (eng.state_low + eng.state_high), rtol=1e-6)
+    obs = eng.global_state(reset_paired(eng, [0]))
+    want = np.clip((obs - pol.vecnorm.obs_rms.mean) / np.sqrt(pol.vecnorm.obs_rms.var + 1e-8), -10, 10)
+    np.testing.assert_allclose(pol._norm(obs), want, rtol=1e-5, atol=1e-6)

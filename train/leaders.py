@@ -88,8 +88,11 @@ SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
 CONFIG_KEYS = (
     "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
     "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum", "action_mode", "central_critic",
-    "checkpoints", "threads",
+    "checkpoints", "threads", "obs_norm",
 )  # fmt: skip
+#: How the observations are normalised: SB3's running mean and deviation, or each entry's declared bounds mapped
+#: onto [-1, 1] (:class:`agents.normalization.FixedMeanStd`; what a curriculum on episode draws needs).
+OBS_NORMS = ("running", "bounds")
 
 
 def usable_cores() -> int:
@@ -448,6 +451,7 @@ def train(
     checkpoints: int = 4,
     threads: int | None = None,
     command: str = "",
+    obs_norm: str = "running",
 ) -> dict[str, Any]:
     """Train, save model + VecNormalize statistics + config, evaluate; returns the config (with results).
 
@@ -476,6 +480,8 @@ def train(
         threads: CPU threads of torch and of the env's compiled step (None: every core this process may use,
             :func:`usable_cores`); give each of several runs side by side its share.
         command: the command line that started the run (recorded in the config).
+        obs_norm: ``"running"`` (SB3's running statistics) or ``"bounds"`` (each observation entry's declared
+            bounds mapped onto [-1, 1], fixed for the whole run: :mod:`agents.normalization`).
     """
     threads = usable_cores() if threads is None else threads
     if isinstance(threads, bool) or not isinstance(threads, int) or threads < 1:
@@ -497,9 +503,16 @@ def train(
         raise ValueError(f"checkpoints must be an integer >= 1, got {checkpoints!r}")
     if central_critic and algo != "ppo":
         raise ValueError("central_critic is for PPO only")
+    if obs_norm not in OBS_NORMS:
+        raise ValueError(f"obs_norm must be one of {OBS_NORMS}, got {obs_norm!r}")
     raw = make_venv(mode, scenario, n_envs, TRAIN_SEED_OFFSET + seed, env_kwargs, residual, action_mode, central_critic)
     base: Any = raw.venv if isinstance(raw, ResidualVecEnv) else raw  # the FormationVecEnv
     venv = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
+    if obs_norm == "bounds":
+        from agents.normalization import FixedMeanStd
+
+        space = venv.observation_space
+        venv.obs_rms = FixedMeanStd(space.low, space.high)  # type: ignore[attr-defined]
     pk: dict[str, Any] = {**POLICY_DEFAULTS.get(algo, {}), **(policy_kwargs or {})}
     if algo == "ppo" and residual > 0:
         pk.setdefault("log_std_init", -1.0)
@@ -571,6 +584,7 @@ def train(
         "sb3_policy_kwargs": pk,
         "config_file": config_file,
         "checkpoints": checkpoints,
+        "obs_norm": obs_norm,
     }
     (out / f"{name}_config.json").write_text(json.dumps(config, indent=2))
     with open(out / "curve.csv", "w", newline="") as fh:
@@ -643,6 +657,11 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         "--threads", type=int, default=None,
         help="CPU threads of torch and the env step; default every usable core (give runs side by side a share)",
     )  # fmt: skip
+    p.add_argument(
+        "--obs-norm", choices=list(OBS_NORMS), default=None,
+        help="observation normalisation: SB3's running statistics, or each entry's declared bounds onto [-1, 1] "
+        "(fixed; for curricula on episode draws); default running",
+    )  # fmt: skip
     p.add_argument("--smoke", action="store_true", help="tiny end-to-end run for CI")
     p.add_argument(
         "--curriculum",
@@ -656,7 +675,7 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
     except (FileNotFoundError, ValueError) as exc:
         p.error(str(exc))
     keys = ("algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "eval_episodes", "env_version",
-            "action_mode", "central_critic", "checkpoints", "threads")  # fmt: skip
+            "action_mode", "central_critic", "checkpoints", "threads", "obs_norm")  # fmt: skip
     for key in keys:
         if getattr(a, key) is not None:
             cfg[key] = getattr(a, key)

@@ -519,10 +519,25 @@ def _lanes_by_grid(circles, lo, hi, step=1e-4):
     return sorted([((a + b) / 2, b - a) for a, b in runs], key=lambda cw: -cw[1])
 
 
+def _route_by_hand(x_near, x_far, room, p, g):
+    """One agent's route length through a lane whose disc-centre room is ``room`` (lo, hi): to the field's near
+    edge at the straight line's height clipped to the room, across, then to the goal (straight once past)."""
+    lo, hi = room
+    if p[0] > x_far:
+        return float(np.hypot(*(g - p)))
+    if p[0] < x_near:
+        ys = np.clip(p[1] + np.clip((x_near - p[0]) / max(g[0] - p[0], 1e-9), 0, 1) * (g[1] - p[1]), lo, hi)
+        return float(np.hypot(x_near - p[0], ys - p[1]) + (x_far - x_near) + np.hypot(g[0] - x_far, g[1] - ys))
+    ys = np.clip(p[1], lo, hi)
+    return float(abs(ys - p[1]) + (x_far - p[0]) + np.hypot(g[0] - x_far, g[1] - ys))
+
+
 def test_obstacle_field_task_block_matches_a_marched_grid():
     """The ``task`` block's lanes (``obstacle_field``) equal the free runs of a fine grid over the world's
-    height; overlapping discs, discs past the world's edge and fewer lanes than N_LANES included."""
-    from formation_env.env.scenarios.obstacle_field import N_LANES
+    height, the route's lane first (of the lanes LANE_WIDTH wide, the least summed route over the team, by
+    hand), then the widest; overlapping discs, discs past the world's edge and fewer lanes than N_LANES
+    included."""
+    from formation_env.env.scenarios.obstacle_field import LANE_WIDTH, N_LANES, ROUTE_MARGIN
 
     eng = Engine("obstacle_field", observation=["position", "task"])
     s = eng.reset(np.random.default_rng(4), 4)
@@ -533,12 +548,21 @@ def test_obstacle_field_task_block_matches_a_marched_grid():
     s.params["_pvec"] = np.ascontiguousarray(eng.scenario.param_vector({"circles": circles}))  # what the row reads
     obs = eng.observe(s)[..., eng.observer.slices["task"]].astype(float)
     lo_y, hi_y = eng.bounds[:, 1]
+    firsts = 0
     for b in range(4):
         c = circles[b]
         pos = s.pos[b]
         b_y = eng.affine.fit(s.pos[b : b + 1])[1][0, 1]
         half = (pos[:, 1].max() - pos[:, 1].min()) / 2 + eng.agent_radius
         lanes = _lanes_by_grid(c, lo_y, hi_y)
+        near, far = (c[:, 0] - c[:, 2]).min(), (c[:, 0] + c[:, 2]).max()
+        room = eng.agent_radius + ROUTE_MARGIN
+        sums = [sum(_route_by_hand(near, far, (yc - w / 2 + room, yc + w / 2 - room), p, g)
+                    for p, g in zip(pos, s.goal[b], strict=True)) if w >= LANE_WIDTH else np.inf
+                for yc, w in lanes]  # fmt: skip
+        if np.isfinite(min(sums, default=np.inf)):
+            lanes.insert(0, lanes.pop(int(np.argmin(sums))))
+            firsts += int(np.argmin(sums)) > 0
         want_lanes = []
         for q in range(N_LANES):
             if q < len(lanes):
@@ -546,9 +570,9 @@ def test_obstacle_field_task_block_matches_a_marched_grid():
             else:
                 want_lanes += [0.0, -2 * (hi_y - lo_y)]
         for i, a in enumerate(eng.leaders):
-            near, far = (c[:, 0] - c[:, 2]).min(), (c[:, 0] + c[:, 2]).max()
             want = [near - pos[a, 0], far - pos[a, 0], *want_lanes]
             np.testing.assert_allclose(obs[b, i], want, atol=2e-4, err_msg=f"env {b}, leader {i}")
+    assert firsts >= 1  # at least one env's route lane is not its widest: the order is tested
     with pytest.raises(FormationError, match="obstacle_field: the task observation block is defined in 2D only"):
         Engine("obstacle_field", framework="bipyramid_3d", observation=["position", "task"])
 
@@ -557,9 +581,10 @@ def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
     """``obstacle_field``'s ``route="lane"`` (2D): round a disc through the lane with the shorter routes for
     the whole team, never a lane narrower than LANE_WIDTH, continuous where an agent enters the field, straight
     once past it."""
-    from formation_env.env.scenarios.obstacle_field import ROUTE_MARGIN, lane_route
+    from formation_env.env.scenarios.obstacle_field import HALF_HEIGHT, ROUTE_MARGIN, ObstacleField, lane_route
 
     assert Engine("obstacle_field", route="lane").scenario.route_row is lane_route
+    assert HALF_HEIGHT == ObstacleField.half_size[1]
     with pytest.raises(FormationError, match="obstacle_field: route must be 'straight', or 'lane' in 2D"):
         Engine("obstacle_field", framework="bipyramid_3d", route="lane")
 
@@ -584,3 +609,5 @@ def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
     assert routes(np.array([0.0]), x=1.5)[0] == pytest.approx(2.5)  # past the field: straight
     disc = np.array([0.0, -0.95, 0.5, 0.0, 0.95, 0.5])  # a lane 0.9 m wide between two discs: too narrow
     assert routes(np.array([0.0]))[0] == pytest.approx(2 * np.hypot(3.5, 1.45 + 0.15) + 1.0)
+    disc = np.array([[0.0, y, 1.0] for y in (-4.0, -2.0, 0.0, 2.0, 4.0)]).ravel()  # no lane in the world's height
+    assert routes(np.array([0.5]), goal_ys=np.array([-1.0]))[0] == pytest.approx(np.hypot(8.0, 1.5))  # straight

@@ -14,14 +14,15 @@ Contact: an agent's path within ``agent_radius`` of an obstacle. Success (and it
 Task features (the optional ``task`` observation block, 2D, per leader, m). The discs' shadows on the y axis,
 [y_c - r, y_c + r], leave free lanes in the world's height, straight corridors along x that cross the field
 without meeting a disc. The block holds the field's near and far x (min x_c - r and max x_c + r) minus the
-leader's x, then, for each of the ``N_LANES`` widest lanes (widest first), its centre's y minus the formation's
-fitted b_y and the room left in it: half its width minus the team's half-height with the discs (negative: the
-formation must shrink to pass). A missing lane reads centre 0 and room -2 H (H the world's height).
+leader's x, then, for ``N_LANES`` lanes, its centre's y minus the formation's fitted b_y and the room left in it:
+half its width minus the team's half-height with the discs (negative: the formation must shrink to pass). The
+first lane is the route's (below), the others the widest, widest first. A missing lane reads centre 0 and room
+-2 H (H the world's height).
 
-``route="lane"`` (2D) makes the ``approach`` reward's route go through one free lane instead of straight to the
-goal: of the lanes (unbounded in y here) at least ``LANE_WIDTH`` wide, the one whose routes sum least over the
-team. Each agent's route runs straight to the lane, along it across the field (its disc ``ROUTE_MARGIN`` from
-the lane's edges), then straight to its goal (:func:`lane_route`).
+The route's lane: of the lanes at least ``LANE_WIDTH`` wide, the one whose routes sum least over the team, each
+agent's route running straight to the lane, along it across the field (its disc ``ROUTE_MARGIN`` from the lane's
+edges), then straight to its goal (:func:`route_lanes`). ``route="lane"`` (2D) makes the ``approach`` reward's
+route go that way instead of straight to the goal (:func:`lane_route`); with no such lane it stays straight.
 """
 
 from __future__ import annotations
@@ -39,9 +40,9 @@ from ..kernel import straight_route
 from ..obstacles import Circle
 from ._base import Array, Draw, EpisodeParam, Scenario, check_range, rotation_2d, rotation_3d
 
-__all__ = ["LANE_WIDTH", "N_LANES", "ROUTE_MARGIN", "ObstacleField"]
+__all__ = ["HALF_HEIGHT", "LANE_WIDTH", "N_LANES", "ROUTE_MARGIN", "ObstacleField"]
 
-#: Lanes in the ``task`` block (the widest, widest first).
+#: Lanes in the ``task`` block (the route's lane, then the widest, widest first).
 N_LANES = 3
 
 
@@ -49,6 +50,8 @@ N_LANES = 3
 ROUTE_MARGIN = 0.05
 #: Narrowest lane (m) the route takes: the passage's narrowest gap, which the team passes at half its height.
 LANE_WIDTH = 1.0
+#: Half the world's height (m, y in [-HALF_HEIGHT, HALF_HEIGHT]): the lanes the route takes lie inside it.
+HALF_HEIGHT = 5.0
 
 
 @jit
@@ -79,16 +82,17 @@ def field_lanes(circles: Array, y_lo: float, y_hi: float) -> tuple[float, float,
 
 @jit
 def task_row(  # pragma: no cover
-    b: int, out: Array, lo: int, leaders: NDArray[np.int64], pos: Array, pvec: Array, bfit: Array, radius: float,
-    bounds: Array,
+    b: int, out: Array, lo: int, leaders: NDArray[np.int64], pos: Array, goal: Array, pvec: Array, bfit: Array,
+    radius: float, bounds: Array,
 ) -> None:  # fmt: skip
-    """The ``task`` block (the module docstring): field's near and far x minus x_i, then per lane of the
-    ``N_LANES`` widest its centre minus b_y and the room left (m). pvec = circles (C * 3,) as (x, y, r)."""
+    """The ``task`` block (the module docstring): field's near and far x minus x_i, then per lane of
+    ``N_LANES``, the route's lane first, its centre minus b_y and the room left (m). pvec = circles (C * 3,) as
+    (x, y, r)."""
     lo_y, hi_y = np.inf, -np.inf
     for j in range(pos.shape[1]):
         lo_y, hi_y = min(lo_y, pos[b, j, 1]), max(hi_y, pos[b, j, 1])
     half = 0.5 * (hi_y - lo_y) + radius
-    x_near, x_far, lane_lo, lane_hi = field_lanes(pvec[b], bounds[0, 1], bounds[1, 1])
+    x_near, x_far, lane_lo, lane_hi = route_lanes(pvec[b], radius, pos[b], goal[b], bounds[0, 1], bounds[1, 1])
     no_room = -2.0 * (bounds[1, 1] - bounds[0, 1])
     for i, a in enumerate(leaders):
         out[i, lo] = x_near - pos[b, a, 0]
@@ -115,27 +119,46 @@ def _lane_route(x_near: float, x_far: float, y_lo: float, y_hi: float, p: Array,
 
 
 @jit
-def lane_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
-    """``route="lane"`` (2D): of the free lanes (unbounded in y) at least ``LANE_WIDTH`` wide, through the one
-    whose routes (:func:`_lane_route`) sum least over the team; straight without circles.
-    pvec = circles (C * 3,), pos, goal (n, 2) -> out (n,), m."""
-    n = pos.shape[0]
-    if pvec.shape[0] == 0:
-        straight_route(pvec, radius, pos, goal, out)
-        return
-    x_near, x_far, lane_lo, lane_hi = field_lanes(pvec, -np.inf, np.inf)
-    best = np.inf
+def route_lanes(  # pragma: no cover
+    pvec: Array, radius: float, pos: Array, goal: Array, y_lo: float, y_hi: float
+) -> tuple[float, float, Array, Array]:
+    """The field's near and far x and its free lanes in [y_lo, y_hi] (:func:`field_lanes`), the route's lane
+    first: of the lanes at least ``LANE_WIDTH`` wide, the one whose routes (:func:`_lane_route`) from ``pos`` to
+    ``goal`` (n, 2) sum least over the team; then the others, widest first (all widest first when no lane is
+    that wide). pvec = circles (C * 3,)."""
+    x_near, x_far, lane_lo, lane_hi = field_lanes(pvec, y_lo, y_hi)
+    best, pick = np.inf, -1
     for q in range(lane_lo.shape[0]):
         if lane_hi[q] - lane_lo[q] < LANE_WIDTH:
             continue
-        y_lo, y_hi = lane_lo[q] + radius + ROUTE_MARGIN, lane_hi[q] - radius - ROUTE_MARGIN
+        room_lo, room_hi = lane_lo[q] + radius + ROUTE_MARGIN, lane_hi[q] - radius - ROUTE_MARGIN
         total = 0.0
-        for i in range(n):
-            total += _lane_route(x_near, x_far, y_lo, y_hi, pos[i], goal[i])
+        for i in range(pos.shape[0]):
+            total += _lane_route(x_near, x_far, room_lo, room_hi, pos[i], goal[i])
         if total < best:
-            best = total
-            for i in range(n):
-                out[i] = _lane_route(x_near, x_far, y_lo, y_hi, pos[i], goal[i])
+            best, pick = total, q
+    if pick > 0:
+        first_lo, first_hi = lane_lo[pick], lane_hi[pick]
+        lane_lo[1 : pick + 1], lane_hi[1 : pick + 1] = lane_lo[:pick].copy(), lane_hi[:pick].copy()
+        lane_lo[0], lane_hi[0] = first_lo, first_hi
+    return x_near, x_far, lane_lo, lane_hi
+
+
+@jit
+def lane_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) -> None:  # pragma: no cover
+    """``route="lane"`` (2D): through the route's lane of :func:`route_lanes` (lanes in the world's height,
+    y in [-HALF_HEIGHT, HALF_HEIGHT]); straight without circles or without a lane ``LANE_WIDTH`` wide.
+    pvec = circles (C * 3,), pos, goal (n, 2) -> out (n,), m."""
+    if pvec.shape[0] == 0:
+        straight_route(pvec, radius, pos, goal, out)
+        return
+    x_near, x_far, lane_lo, lane_hi = route_lanes(pvec, radius, pos, goal, -HALF_HEIGHT, HALF_HEIGHT)
+    if lane_lo.shape[0] == 0 or lane_hi[0] - lane_lo[0] < LANE_WIDTH:
+        straight_route(pvec, radius, pos, goal, out)
+        return
+    room_lo, room_hi = lane_lo[0] + radius + ROUTE_MARGIN, lane_hi[0] - radius - ROUTE_MARGIN
+    for i in range(pos.shape[0]):
+        out[i] = _lane_route(x_near, x_far, room_lo, room_hi, pos[i], goal[i])
 
 
 class ObstacleField(Scenario):

@@ -55,6 +55,19 @@ HALF_HEIGHT = 5.0
 
 
 @jit
+def _order(key: Array, m: int) -> NDArray[np.int64]:  # pragma: no cover
+    """Indices that sort key[:m] ascending, ties in index order (an insertion sort: m is a handful)."""
+    idx = np.arange(m)
+    for i in range(1, m):
+        j, k = i, idx[i]
+        while j > 0 and key[idx[j - 1]] > key[k]:
+            idx[j] = idx[j - 1]
+            j -= 1
+        idx[j] = k
+    return idx
+
+
+@jit
 def field_lanes(circles: Array, y_lo: float, y_hi: float) -> tuple[float, float, Array, Array]:  # pragma: no cover
     """The field of circles (C * 3,) as (x, y, r): its near and far x (min x - r, max x + r; 0 without
     circles) and its free lanes in [y_lo, y_hi], the parts outside every circle's shadow [y - r, y + r]
@@ -68,7 +81,7 @@ def field_lanes(circles: Array, y_lo: float, y_hi: float) -> tuple[float, float,
         shadow_lo[j], shadow_hi[j] = y - r, y + r
     lane_lo, lane_hi = np.empty(c + 1), np.empty(c + 1)
     m, top = 0, y_lo  # swept bottom to top
-    for j in np.argsort(shadow_lo, kind="mergesort"):
+    for j in _order(shadow_lo, c):
         if shadow_lo[j] > top:
             lane_lo[m], lane_hi[m] = top, shadow_lo[j]
             m += 1
@@ -76,7 +89,7 @@ def field_lanes(circles: Array, y_lo: float, y_hi: float) -> tuple[float, float,
     if y_hi > top:
         lane_lo[m], lane_hi[m] = top, y_hi
         m += 1
-    order = np.argsort(lane_lo[:m] - lane_hi[:m], kind="mergesort")
+    order = _order(lane_lo - lane_hi, m)
     return x_near, x_far, lane_lo[order], lane_hi[order]
 
 

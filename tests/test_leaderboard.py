@@ -220,7 +220,7 @@ def test_shipped_policy_is_what_its_recorded_command_trains(path: Path) -> None:
     assert run["config_file"] == shipped.get("config_file")
     defaults = {"algo": "ppo", "mode": "commander", "scenario": "narrow_passage", "timesteps": 100_000, "seed": 0,
                 "n_envs": 16, "residual": 0.0, "action_mode": "leaders", "range_curriculum": None,
-                "central_critic": False, "checkpoints": 4}  # fmt: skip
+                "central_critic": False, "checkpoints": 4, "obs_norm": "running"}  # fmt: skip
     for key, default in defaults.items():
         assert json.loads(json.dumps(run.get(key, default))) == shipped.get(key, default), key
     assert with_version(run.get("env_version", 0), run.get("env_kwargs", {})) == shipped["env_kwargs"]

@@ -509,10 +509,14 @@ def train(
     base: Any = raw.venv if isinstance(raw, ResidualVecEnv) else raw  # the FormationVecEnv
     venv = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
     if obs_norm == "bounds":
+        from gymnasium.spaces import Box
+
         from agents.normalization import FixedMeanStd
 
         space = venv.observation_space
-        venv.obs_rms = FixedMeanStd(space.low, space.high)  # type: ignore[attr-defined]
+        if not isinstance(space, Box):
+            raise ValueError(f"obs_norm='bounds' needs a Box observation space, got {space}")
+        venv.obs_rms = FixedMeanStd(space.low, space.high)  # type: ignore[assignment]  # a Box: one array of stats
     pk: dict[str, Any] = {**POLICY_DEFAULTS.get(algo, {}), **(policy_kwargs or {})}
     if algo == "ppo" and residual > 0:
         pk.setdefault("log_std_init", -1.0)

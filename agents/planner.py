@@ -469,7 +469,7 @@ def main(argv: list[str] | None = None) -> int:
     import argparse
     import json
 
-    from formation_env.core.validation import check_mapping
+    from formation_env.core.validation import json_object
 
     p = argparse.ArgumentParser(
         prog="python -m agents.planner", description="Grid search of a scenario's planner on training seeds."
@@ -483,10 +483,9 @@ def main(argv: list[str] | None = None) -> int:
     kwargs = {}
     for flag, text in (("--env-kwargs", a.env_kwargs), ("--grid", a.grid)):
         try:
-            kwargs[flag] = json.loads(text) if text else None
-            check_mapping(kwargs[flag], flag)
-        except (ValueError, TypeError) as exc:
-            p.error(f"{flag} must be a JSON object: {exc}")
+            kwargs[flag] = json_object(flag, text) or None
+        except ValueError as exc:
+            p.error(str(exc))
     best, rows = tune(a.tune, a.seeds, env_kwargs=kwargs["--env-kwargs"], grid=kwargs["--grid"])
     for params, stats in rows[:10]:
         print(json.dumps(params), json.dumps(stats))

@@ -253,6 +253,8 @@ class LearnedPolicy(TrainedPolicy):
         self.name = str(config.get("name", f"{config.get('algo', 'learned')}_{self.mode}"))
         self._engine = engine
         self.maneuver = config.get("action_mode", "leaders") == "maneuver"
+        #: Act on the mean action (every evaluation); False samples the policy's Gaussian, as in training.
+        self.deterministic = True
         self._command: PoseCommand | None = None
         self._pose: Pose | None = None
 
@@ -301,7 +303,7 @@ class LearnedPolicy(TrainedPolicy):
         return o
 
     def _raw(self, obs: NDArray[np.float32]) -> NDArray[np.float32]:
-        a, _ = self.model.predict(self._norm(obs), deterministic=True)
+        a, _ = self.model.predict(self._norm(obs), deterministic=self.deterministic)
         return np.clip(np.asarray(a, dtype=np.float32).reshape(obs.shape[0], -1), -1.0, 1.0)
 
     def _plan(self, engine: Engine, state: EngineState) -> Array:

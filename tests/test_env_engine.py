@@ -581,10 +581,9 @@ def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
     """``obstacle_field``'s ``route="lane"`` (2D): round a disc through the lane with the shorter routes for
     the whole team, never a lane narrower than LANE_WIDTH, continuous where an agent enters the field, straight
     once past it."""
-    from formation_env.env.scenarios.obstacle_field import HALF_HEIGHT, ROUTE_MARGIN, ObstacleField, lane_route
+    from formation_env.env.scenarios.obstacle_field import ROUTE_MARGIN, lane_route
 
     assert Engine("obstacle_field", route="lane").scenario.route_row is lane_route
-    assert HALF_HEIGHT == ObstacleField.half_size[1]
     with pytest.raises(FormationError, match="obstacle_field: route must be 'straight', or 'lane' in 2D"):
         Engine("obstacle_field", framework="bipyramid_3d", route="lane")
 

@@ -469,3 +469,20 @@ def test_bounds_normalisation_is_kept_through_training_saving_and_acting(tmp_pat
     obs = eng.global_state(reset_paired(eng, [0]))
     want = np.clip((obs - pol.vecnorm.obs_rms.mean) / np.sqrt(pol.vecnorm.obs_rms.var + 1e-8), -10, 10)
     np.testing.assert_allclose(pol._norm(obs), want, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.slow
+def test_noise_gap_reports_the_noise_and_both_ways_of_acting(tmp_path: Path) -> None:
+    """``python -m train.noise_gap``: the policy's Gaussian deviation per action entry, its deterministic rates equal
+    the evaluation's, and the sampled ones are reproducible for a seed."""
+    from train.noise_gap import noise_gap
+
+    train("ppo", "commander", "hold", 512, seed=0, out=tmp_path, smoke=True, n_envs=2, eval_episodes=0,
+          policy_kwargs={"log_std_init": 0.5})  # fmt: skip
+    path = str(tmp_path / "hold_commander.zip")
+    gap = noise_gap(path, 3, seed=5)
+    std = np.exp(LearnedPolicy.load(path).model.policy.log_std.detach().numpy())
+    np.testing.assert_allclose(gap["noise"], std, atol=1e-3)
+    m = evaluate(path, None, 3, seed=5, generalisation=False)["metrics"]
+    assert gap["deterministic"] == {k: m[k] for k in ("success_rate", "collision_rate")}
+    assert noise_gap(path, 3, seed=5)["sampled"] == gap["sampled"]

@@ -3,10 +3,13 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
+
+from formation_env.core.validation import json_object
+
+__all__ = ["json_object", "load_recipe"]
 
 
 def load_recipe(path: str | Path, keys: Sequence[str]) -> dict[str, Any]:
@@ -24,16 +27,3 @@ def load_recipe(path: str | Path, keys: Sequence[str]) -> dict[str, Any]:
     if unknown:
         raise ValueError(f"--config: {p} has unknown keys {unknown}; allowed: {list(keys)}")
     return cfg
-
-
-def json_object(flag: str, text: str) -> dict[str, Any]:
-    """The JSON object given to ``flag`` ({} for ''); a ValueError naming the flag if ``text`` is not one."""
-    if not text:
-        return {}
-    try:
-        value = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"{flag} must be a JSON object such as '{{\"dt\": 0.05}}': {exc}") from None
-    if not isinstance(value, dict):
-        raise ValueError(f"{flag} must be a JSON object (a dict of arguments), got {text!r}")
-    return value

@@ -41,6 +41,7 @@ __all__ = [
     "check_shape",
     "check_square_matrix",
     "check_symmetric",
+    "json_object",
 ]
 
 
@@ -309,6 +310,22 @@ def check_mapping(x: Any, name: str) -> dict[str, Any]:
     if not isinstance(x, dict):
         raise TypeError(f"{name} must be a dict or None, got {_describe(x)}")
     return x
+
+
+def json_object(flag: str, text: str) -> dict[str, Any]:
+    """The JSON object given to the command-line ``flag`` ({} for ''); a ValueError naming the flag if ``text`` is
+    not one."""
+    import json
+
+    if not text:
+        return {}
+    try:
+        value = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{flag} must be a JSON object such as '{{\"dt\": 0.05}}': {exc}") from None
+    if not isinstance(value, dict):
+        raise ValueError(f"{flag} must be a JSON object (a dict of arguments), got {text!r}")
+    return value
 
 
 def check_kwargs_consumed(kwargs: dict[str, Any], where: str) -> None:

@@ -50,7 +50,8 @@ N_LANES = 3
 ROUTE_MARGIN = 0.05
 #: Narrowest lane (m) the route takes: the passage's narrowest gap, which the team passes at half its height.
 LANE_WIDTH = 1.0
-#: Half the world's height (m, y in [-HALF_HEIGHT, HALF_HEIGHT]): the lanes the route takes lie inside it.
+#: Half the world's height (m, y in [-HALF_HEIGHT, HALF_HEIGHT]; the scenario's ``half_size``): the route's lanes lie
+#: inside it.
 HALF_HEIGHT = 5.0
 
 
@@ -132,24 +133,35 @@ def _lane_route(x_near: float, x_far: float, y_lo: float, y_hi: float, p: Array,
 
 
 @jit
+def _team_routes(  # pragma: no cover
+    x_near: float, x_far: float, lane_lo: float, lane_hi: float, radius: float, pos: Array, goal: Array, out: Array
+) -> float:
+    """Every agent's route (:func:`_lane_route`) from ``pos`` to ``goal`` (n, 2) through the lane [lane_lo, lane_hi]
+    (its disc ``ROUTE_MARGIN`` from the edges) into ``out`` (n,), m; returns their sum."""
+    room_lo, room_hi = lane_lo + radius + ROUTE_MARGIN, lane_hi - radius - ROUTE_MARGIN
+    total = 0.0
+    for i in range(pos.shape[0]):
+        out[i] = _lane_route(x_near, x_far, room_lo, room_hi, pos[i], goal[i])
+        total += out[i]
+    return total
+
+
+@jit
 def route_lanes(  # pragma: no cover
     pvec: Array, radius: float, pos: Array, goal: Array, y_lo: float, y_hi: float
 ) -> tuple[float, float, Array, Array]:
     """The field's near and far x and its free lanes in [y_lo, y_hi] (:func:`field_lanes`), the route's lane
-    first: of the lanes at least ``LANE_WIDTH`` wide, the one whose routes (:func:`_lane_route`) from ``pos`` to
+    first: of the lanes at least ``LANE_WIDTH`` wide, the one whose routes (:func:`_team_routes`) from ``pos`` to
     ``goal`` (n, 2) sum least over the team; then the others, widest first (all widest first when no lane is
     that wide). pvec = circles (C * 3,)."""
     x_near, x_far, lane_lo, lane_hi = field_lanes(pvec, y_lo, y_hi)
     best, pick = np.inf, -1
+    scratch = np.empty(pos.shape[0])
     for q in range(lane_lo.shape[0]):
-        if lane_hi[q] - lane_lo[q] < LANE_WIDTH:
-            continue
-        room_lo, room_hi = lane_lo[q] + radius + ROUTE_MARGIN, lane_hi[q] - radius - ROUTE_MARGIN
-        total = 0.0
-        for i in range(pos.shape[0]):
-            total += _lane_route(x_near, x_far, room_lo, room_hi, pos[i], goal[i])
-        if total < best:
-            best, pick = total, q
+        if lane_hi[q] - lane_lo[q] >= LANE_WIDTH:
+            total = _team_routes(x_near, x_far, lane_lo[q], lane_hi[q], radius, pos, goal, scratch)
+            if total < best:
+                best, pick = total, q
     if pick > 0:
         first_lo, first_hi = lane_lo[pick], lane_hi[pick]
         lane_lo[1 : pick + 1], lane_hi[1 : pick + 1] = lane_lo[:pick].copy(), lane_hi[:pick].copy()
@@ -168,10 +180,8 @@ def lane_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Array) 
     x_near, x_far, lane_lo, lane_hi = route_lanes(pvec, radius, pos, goal, -HALF_HEIGHT, HALF_HEIGHT)
     if lane_lo.shape[0] == 0 or lane_hi[0] - lane_lo[0] < LANE_WIDTH:
         straight_route(pvec, radius, pos, goal, out)
-        return
-    room_lo, room_hi = lane_lo[0] + radius + ROUTE_MARGIN, lane_hi[0] - radius - ROUTE_MARGIN
-    for i in range(pos.shape[0]):
-        out[i] = _lane_route(x_near, x_far, room_lo, room_hi, pos[i], goal[i])
+    else:
+        _team_routes(x_near, x_far, lane_lo[0], lane_hi[0], radius, pos, goal, out)
 
 
 class ObstacleField(Scenario):
@@ -179,7 +189,7 @@ class ObstacleField(Scenario):
 
     name: ClassVar[str] = "obstacle_field"
     dims: ClassVar[tuple[int, ...]] = (2, 3)
-    half_size: ClassVar[tuple[float, ...]] = (7.0, 5.0, 5.0)
+    half_size: ClassVar[tuple[float, ...]] = (7.0, HALF_HEIGHT, HALF_HEIGHT)
     obstacle_types = (Circle,)
     planner: ClassVar[str | None] = "agents.planner:FieldPlanner"
     follower_noise: float = 0.1

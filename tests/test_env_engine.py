@@ -577,6 +577,53 @@ def test_obstacle_field_task_block_matches_a_marched_grid():
         Engine("obstacle_field", framework="bipyramid_3d", observation=["position", "task"])
 
 
+def _moving_task_by_hand(eng, s):
+    """``moving_obstacles``' task block from the state (numpy, MovingCircle's own capsules and velocity)."""
+    from formation_env.env.scenarios.moving_obstacles import FORECAST
+
+    t, p, mc = eng.time(s), s.params["moving_circles"], MovingCircle()
+    b_y = eng.affine.fit(s.pos)[1][:, 1]
+    half = 0.5 * (s.pos[:, :, 1].max(1) - s.pos[:, :, 1].min(1)) + eng.agent_radius
+    v_y = mc.velocity(p, t, eng.bounds)[:, :, 1]
+    ahead = [mc.capsules(p, t + tau, eng.bounds).a for tau in FORECAST]
+    rows = []
+    for j in range(p.shape[1]):
+        rows += [ahead[0][:, j, 0, None] - s.pos[:, eng.leaders, 0]]
+        rows += [np.repeat(v[:, None], eng.n_l, 1) for v in (ahead[0][:, j, 1] - b_y, v_y[:, j])]
+        rows += [np.repeat((np.abs(c[:, j, 1] - b_y) - p[:, j, 4] - half)[:, None], eng.n_l, 1) for c in ahead]
+    lo, hi = eng.scenario.task_feature_bounds()
+    return np.clip(np.stack(rows, -1), lo, hi)
+
+
+@pytest.mark.parametrize("network", [None, {"jitter": (0.05, 0.15)}])
+def test_moving_obstacles_task_block_forecasts_the_discs(network):
+    """``moving_obstacles``' ``task`` block: per disc its lane's x, its y and velocity, and the room it leaves the
+    team's band now and FORECAST s ahead on its bouncing path, at the reset's observation and after every step,
+    at the env's time (under a jittered network too, where the time is the sum of the drawn periods)."""
+    kw = {} if network is None else {"follower_law": "linear", "network": network}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", StabilityWarning)  # the jittered linear law's margin: not what is tested
+        eng = Engine("moving_obstacles", observation=["position", "task"], **kw)
+    sl = eng.observer.slices["task"]
+    assert sl.stop - sl.start == 3 * 7
+    s = eng.reset(np.random.default_rng(3), 6)
+    np.testing.assert_allclose(eng.observe(s)[..., sl], _moving_task_by_hand(eng, s), atol=2e-4)
+    rng = np.random.default_rng(0)
+    bounced = False
+    for _ in range(60):
+        v_before = MovingCircle().velocity(s.params["moving_circles"], eng.time(s), eng.bounds)
+        s, obs, *_ = eng.step(s, 0.3 * rng.uniform(-1, 1, (6, eng.n_l, eng.p)))
+        bounced |= bool(
+            (MovingCircle().velocity(s.params["moving_circles"], eng.time(s), eng.bounds) != v_before).any()
+        )
+        np.testing.assert_allclose(obs[..., sl], _moving_task_by_hand(eng, s), atol=2e-4)
+    if network is not None:
+        assert not np.allclose(eng.time(s), eng.dt * s.k)  # the drawn periods, not k T
+    room = obs[..., sl].reshape(6, eng.n_l, 3, 7)[..., 3:]
+    assert (room < 0).any() and (room > 0).any()  # discs in the band and out of it
+    assert bounced or network is not None
+
+
 def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
     """``obstacle_field``'s ``route="lane"`` (2D): round a disc through the lane with the shorter routes for
     the whole team, never a lane narrower than LANE_WIDTH, continuous where an agent enters the field, straight

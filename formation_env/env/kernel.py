@@ -213,6 +213,8 @@ ARRAYS: tuple[ArraySpec, ...] = (
               f"{_E}(pos0.shape)", "state", True),
     ArraySpec("k", "(B,)", "samples", _LAW, "samples taken after the step", f"{_E}(B, np.int64)", "state", True),
     # obstacles
+    ArraySpec("now", "(B,)", "s", "capsules", "the env time t of the sample: k T, or under jitter the sum of the drawn "
+              "periods", "np.empty(B)"),
     ArraySpec("cur_a", "(B, m, d)", "m", "capsules", "every capsule's axis start at t = k T (static, then each "
               "moving type's)", f"{_E}((B, m, d))"),
     ArraySpec("cur_e", "(B, m, d)", "m", "capsules", "every capsule's axis (start to end) at t", f"{_E}((B, m, d))"),
@@ -316,12 +318,16 @@ ARRAYS: tuple[ArraySpec, ...] = (
     ArraySpec("cap_r", "(B, m_s)", "m", "reset", "static capsules' radii"),
     ArraySpec("mov_p", "tuple of (B, M_j, w_j)", "type's", "reset", "each moving type's parameters (its row's p)"),
     ArraySpec("goal_p", "(B, w)", "scenario's", "reset", "what the scenario's pose_row reads of a moving goal"),
+    ArraySpec("mov_p0", "(B, M_0, w_0)", "type's", "reset", "the first moving type's parameters, mov_p[0], for a "
+              "component that forecasts it ((B, 0, 0) in a scenario with none)"),
 )
 # fmt: on
 SPECS: dict[str, ArraySpec] = {a.name: a for a in ARRAYS}
 if set(Consts._fields) | set(NetConsts._fields) != {a.name for a in ARRAYS if a.writer == "engine"} or set(
     Episode._fields
-) != {a.name for a in ARRAYS if a.writer == "reset"}:  # pragma: no cover  (a declaration out of step with the records)
+) | {"mov_p0"} != {
+    a.name for a in ARRAYS if a.writer == "reset"
+}:  # pragma: no cover  (a declaration out of step with the records)
     raise RuntimeError("kernel.ARRAYS must declare every field of Consts (engine) and Episode (reset)")
 
 #: What the step returns of its arrays, in :data:`ARRAYS` order (the compiled step returns a plain tuple, since
@@ -600,9 +606,9 @@ PARTS: tuple[Part, ...] = (
                      "time"), None,
          "instead of law, with a network: draws, what is sent and received, u_f = G c, every agent's ZOH over the "
          "period (env.network)", (network_row,)),
-    Part("capsules", ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
-         ("cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
-         "the static capsules, then each moving type's row at t and at t - T"),
+    Part("capsules", ("now", "cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
+         ("now", "cur_a", "cur_e", "cur_r", "old_a", "old_e", "old_r"),
+         "the sample's time t, the static capsules, then each moving type's row at t and at t - T"),
     Part("contacts", ("clear", "flags:collision", "flags:oob"), ("clear", "flags:collision", "flags:oob"),
          "clearance of agent pairs and capsules (swept along the step when something moved fast), the box",
          (contacts_row,)),
@@ -738,7 +744,7 @@ class _Composer:
         if rows:
             return [call(fn) for fn in rows]
         if part == "capsules":
-            lines = [call(static_capsules)]
+            lines = [f"now[b] = {self.at_state if observe else self.now}", call(static_capsules)]
             for j, row in enumerate(self.moving):
                 nm, sl = self.alias(row), f"[b, m{j}:m{j + 1}]"
                 now = self.at_state if observe else self.now
@@ -936,6 +942,7 @@ def _head(lines: Sequence[str], n_moving: int) -> str:
     out += [f"{nm} = nc.{nm}" for nm in NetConsts._fields if nm in used]
     out += [f"{nm} = ep.{nm}" for nm in Episode._fields if nm in used]
     out += [f"mov_p{j} = ep.mov_p[{j}]" for j in range(n_moving)]
+    out += ["mov_p0 = np.zeros((B, 0, 0))"] if n_moving == 0 and "mov_p0" in used else []
     out += ["m0 = cap_r.shape[1]"] + [f"m{j + 1} = m{j} + mov_p{j}.shape[1]" for j in range(n_moving)]
     out += [f"m = m{n_moving}"]
     return "\n".join("    " + line for line in out)

@@ -24,6 +24,12 @@ Contact: an agent centre within ``agent_radius`` of a disc's rim, at a sample or
 the moving disc). Success as in ``narrow_passage``. ``agents.scripted.crossing_action`` (shrink, wait until the
 crossing is predicted clear, cross, restore, go to the goal) shows in the tests that episodes are solvable. The
 global state carries each disc's current centre, velocity and radius.
+
+Task features (the optional ``task`` observation block, 2D, per leader; m, m/s). Per disc, in lane order: its
+lane's x minus the leader's x, its centre's y minus the formation's fitted b_y, its velocity along y, then the
+room it leaves the team's band now and ``FORECAST`` seconds ahead (on its bouncing path):
+|y_c(t + tau) - b_y| minus its radius and the team's half-height with the agents' discs. Negative room: the disc
+is in the band the team sweeps, so crossing its lane then would meet it.
 """
 
 from __future__ import annotations
@@ -31,13 +37,53 @@ from __future__ import annotations
 from typing import Any, ClassVar
 
 import numpy as np
+from numpy.typing import NDArray
 
 from formation_env.core.errors import FormationError
 
-from ..obstacles import MovingCircle
+from .._numba import jit
+from ..obstacles import MovingCircle, bounce_row
 from ._base import Array, Draw, Scenario, check_range, rotation_2d
 
-__all__ = ["MovingObstacles"]
+__all__ = ["FORECAST", "MovingObstacles"]
+
+#: Look-ahead times (s) of the ``task`` block's room entries (0: now).
+FORECAST = (0.0, 1.0, 2.0, 3.0)
+_FORECAST = np.array(FORECAST)
+#: Entries per disc in the ``task`` block: lane x, centre y, velocity y, then the room at each look-ahead.
+_PER_DISC = 3 + len(FORECAST)
+
+
+@jit
+def task_row(  # pragma: no cover
+    b: int, out: Array, lo: int, leaders: NDArray[np.int64], pos: Array, bfit: Array, radius: float, now: Array,
+    mov_p0: Array, bounds: Array,
+) -> None:  # fmt: skip
+    """The ``task`` block (the module docstring). mov_p0 (B, M, 5): each disc's start centre, velocity, radius."""
+    lo_y, hi_y = np.inf, -np.inf
+    for j in range(pos.shape[1]):
+        lo_y, hi_y = min(lo_y, pos[b, j, 1]), max(hi_y, pos[b, j, 1])
+    half = 0.5 * (hi_y - lo_y) + radius
+    p = mov_p0[b]
+    m = p.shape[0]
+    n_f = _FORECAST.shape[0]
+    at = np.empty((n_f, m, 2))
+    e = np.empty((m, 2))
+    rad = np.empty(m)
+    for q in range(n_f):
+        bounce_row(p, now[b] + _FORECAST[q], bounds, at[q], e, rad)
+    for j in range(m):
+        # the leg of the bounce the disc is on now: its velocity along y
+        span = max(bounds[1, 1] - bounds[0, 1] - 2.0 * p[j, 4], 1e-12)
+        s = (p[j, 1] - bounds[0, 1] - p[j, 4] + p[j, 3] * now[b]) % (2.0 * span)
+        v_y = p[j, 3] if s <= span else -p[j, 3]
+        for i, a in enumerate(leaders):
+            k = lo + _PER_DISC * j
+            out[i, k] = at[0, j, 0] - pos[b, a, 0]
+            out[i, k + 1] = at[0, j, 1] - bfit[b, 1]
+            out[i, k + 2] = v_y
+            for q in range(n_f):
+                out[i, k + 3 + q] = abs(at[q, j, 1] - bfit[b, 1]) - p[j, 4] - half
 
 
 class MovingObstacles(Scenario):
@@ -95,3 +141,12 @@ class MovingObstacles(Scenario):
         bg = np.stack([raw["goal_x"], raw["goal_y"]], -1)
         params = {"goal_theta": rotation_2d(raw["angle_g"]), "goal_b": bg, "moving_circles": discs}
         return params, (rotation_2d(raw["angle0"]), b0)
+
+    task_row = staticmethod(task_row)
+
+    def task_feature_bounds(self) -> tuple[Array, Array]:
+        ext = self.bounds[1] - self.bounds[0]
+        v = MovingCircle.max_speed
+        lo = np.array([-ext[0], -ext[1], -v] + [-ext[1]] * len(FORECAST))
+        hi = np.array([ext[0], ext[1], v] + [ext[1]] * len(FORECAST))
+        return np.tile(lo, self.n_moving), np.tile(hi, self.n_moving)

@@ -61,6 +61,7 @@ __all__ = [
     "fit_rows",
     "jit",
     "straight_route",
+    "team_half_height",
 ]
 
 Array = NDArray[np.float64]
@@ -562,6 +563,16 @@ def straight_route(pvec: Array, radius: float, pos: Array, goal: Array, out: Arr
 
 
 @jit
+def team_half_height(pos: Array, radius: float) -> float:  # pragma: no cover
+    """Half the team's height with the agents' discs, (max y - min y) / 2 + radius (m), of positions pos (n, d):
+    the half-width of the band along y the team sweeps when it moves along x (the ``task`` blocks' room)."""
+    lo_y, hi_y = np.inf, -np.inf
+    for j in range(pos.shape[0]):
+        lo_y, hi_y = min(lo_y, pos[j, 1]), max(hi_y, pos[j, 1])
+    return 0.5 * (hi_y - lo_y) + radius
+
+
+@jit
 def finish_obs(  # pragma: no cover
     b: int, buf: Array, noise: Array, noise_mask: Array, obs_low: Array, obs_high: Array, obs: NDArray[np.float32]
 ) -> None:
@@ -747,8 +758,7 @@ class _Composer:
             lines = [f"now[b] = {self.at_state if observe else self.now}", call(static_capsules)]
             for j, row in enumerate(self.moving):
                 nm, sl = self.alias(row), f"[b, m{j}:m{j + 1}]"
-                now = self.at_state if observe else self.now
-                for t, pre in ((now, "cur"), (self.at_state if observe else self.before, "old")):
+                for t, pre in (("now[b]", "cur"), (self.at_state if observe else self.before, "old")):
                     lines.append(f"{nm}(mov_p{j}[b], {t}, bounds, {pre}_a{sl}, {pre}_e{sl}, {pre}_r{sl})")
             return lines
         if part == "goal":

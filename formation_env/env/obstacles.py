@@ -42,6 +42,7 @@ __all__ = [
     "MovingCircle",
     "Obstacle",
     "Segment",
+    "bounce_axis",
     "bounce_row",
     "path_clearance",
     "point_clearance",
@@ -154,21 +155,28 @@ class Circle(Obstacle):
 
 
 @jit
+def bounce_axis(
+    c0: float, v: float, r: float, lo: float, hi: float, t: float
+) -> tuple[float, float]:  # pragma: no cover
+    """Centre (m) and velocity (m/s) at time t (s), along one axis, of a disc of radius r that starts at c0 with
+    velocity v and bounces elastically between the faces lo and hi: its centre moves in [lo + r, hi - r]. With
+    span L = hi - lo - 2 r and s = (c0 - lo - r + v t) mod 2 L, it is lo + r + s, moving at v, for s <= L, and
+    lo + r + 2 L - s, moving at -v, after (a triangle wave)."""
+    lo_c = lo + r
+    span = max(hi - r - lo_c, 1e-12)
+    s = (c0 - lo_c + v * t) % (2.0 * span)
+    return (lo_c + s, v) if s <= span else (lo_c + 2.0 * span - s, -v)
+
+
+@jit
 def bounce_row(p: Array, t: float, bounds: Array, a: Array, e: Array, rad: Array) -> None:  # pragma: no cover
     """Capsules at time t (s) of discs ``p`` (M, 2 d + 1) = start centre c0, velocity v, radius that bounce
-    elastically off the box ``bounds`` (2, d): into a, e (M, d) and rad (M,).
-
-    Per axis the centre moves in [lo + r, hi - r]: with span L = hi - lo - 2 r and s = (c0 - lo - r + v t)
-    mod 2 L, it is lo + r + s for s <= L and lo + r + 2 L - s after (a triangle wave).
-    """
+    elastically off the box ``bounds`` (2, d) (per axis :func:`bounce_axis`): into a, e (M, d) and rad (M,)."""
     d = a.shape[1]
     for j in range(p.shape[0]):
         r = p[j, 2 * d]
         for k in range(d):
-            lo = bounds[0, k] + r
-            span = max(bounds[1, k] - r - lo, 1e-12)
-            s = (p[j, k] - lo + p[j, d + k] * t) % (2.0 * span)
-            a[j, k] = lo + (s if s <= span else 2.0 * span - s)
+            a[j, k] = bounce_axis(p[j, k], p[j, d + k], r, bounds[0, k], bounds[1, k], t)[0]
             e[j, k] = 0.0
         rad[j] = r
 

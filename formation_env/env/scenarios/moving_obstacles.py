@@ -42,7 +42,8 @@ from numpy.typing import NDArray
 from formation_env.core.errors import FormationError
 
 from .._numba import jit
-from ..obstacles import MovingCircle, bounce_row
+from ..kernel import team_half_height
+from ..obstacles import MovingCircle, bounce_axis
 from ._base import Array, Draw, Scenario, check_range, rotation_2d
 
 __all__ = ["FORECAST", "MovingObstacles"]
@@ -60,30 +61,20 @@ def task_row(  # pragma: no cover
     mov_p0: Array, bounds: Array,
 ) -> None:  # fmt: skip
     """The ``task`` block (the module docstring). mov_p0 (B, M, 5): each disc's start centre, velocity, radius."""
-    lo_y, hi_y = np.inf, -np.inf
-    for j in range(pos.shape[1]):
-        lo_y, hi_y = min(lo_y, pos[b, j, 1]), max(hi_y, pos[b, j, 1])
-    half = 0.5 * (hi_y - lo_y) + radius
-    p = mov_p0[b]
-    m = p.shape[0]
-    n_f = _FORECAST.shape[0]
-    at = np.empty((n_f, m, 2))
-    e = np.empty((m, 2))
-    rad = np.empty(m)
-    for q in range(n_f):
-        bounce_row(p, now[b] + _FORECAST[q], bounds, at[q], e, rad)
-    for j in range(m):
-        # the leg of the bounce the disc is on now: its velocity along y
-        span = max(bounds[1, 1] - bounds[0, 1] - 2.0 * p[j, 4], 1e-12)
-        s = (p[j, 1] - bounds[0, 1] - p[j, 4] + p[j, 3] * now[b]) % (2.0 * span)
-        v_y = p[j, 3] if s <= span else -p[j, 3]
+    half = team_half_height(pos[b], radius)
+    for j in range(mov_p0.shape[1]):
+        c0x, c0y, vx, vy, r = mov_p0[b, j]
+        x = bounce_axis(c0x, vx, r, bounds[0, 0], bounds[1, 0], now[b])[0]
+        y, v_y = bounce_axis(c0y, vy, r, bounds[0, 1], bounds[1, 1], now[b])
+        k = lo + _PER_DISC * j
         for i, a in enumerate(leaders):
-            k = lo + _PER_DISC * j
-            out[i, k] = at[0, j, 0] - pos[b, a, 0]
-            out[i, k + 1] = at[0, j, 1] - bfit[b, 1]
+            out[i, k] = x - pos[b, a, 0]
+            out[i, k + 1] = y - bfit[b, 1]
             out[i, k + 2] = v_y
-            for q in range(n_f):
-                out[i, k + 3 + q] = abs(at[q, j, 1] - bfit[b, 1]) - p[j, 4] - half
+        for q in range(_FORECAST.shape[0]):
+            room = abs(bounce_axis(c0y, vy, r, bounds[0, 1], bounds[1, 1], now[b] + _FORECAST[q])[0] - bfit[b, 1])
+            for i in range(leaders.shape[0]):
+                out[i, k + 3 + q] = room - r - half
 
 
 class MovingObstacles(Scenario):

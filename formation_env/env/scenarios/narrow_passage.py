@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from .._numba import jit
+from ..kernel import team_half_height
 from ..obstacles import Segment
 from ._base import Array, Draw, EpisodeParam, Scenario, check_range, rotation_2d
 
@@ -49,10 +50,7 @@ def task_row(  # pragma: no cover
 ) -> None:
     """The ``task`` block: wall_x - x_i, gap_center - b_y (b the affine fit's translation), and the room left
     in the gap, gap_width / 2 minus the team's half-height with the discs (m)."""
-    lo_y, hi_y = np.inf, -np.inf
-    for j in range(pos.shape[1]):
-        lo_y, hi_y = min(lo_y, pos[b, j, 1]), max(hi_y, pos[b, j, 1])
-    half = 0.5 * (hi_y - lo_y) + radius
+    half = team_half_height(pos[b], radius)
     for i, a in enumerate(leaders):
         out[i, lo] = pvec[b, 0] - pos[b, a, 0]
         out[i, lo + 1] = pvec[b, 1] - bfit[b, 1]

@@ -36,7 +36,7 @@ from numpy.typing import NDArray
 from formation_env.core.errors import FormationError
 
 from .._numba import jit
-from ..kernel import straight_route
+from ..kernel import straight_route, team_half_height
 from ..obstacles import Circle
 from ._base import Array, Draw, EpisodeParam, Scenario, check_range, rotation_2d, rotation_3d
 
@@ -102,10 +102,7 @@ def task_row(  # pragma: no cover
     """The ``task`` block (the module docstring): field's near and far x minus x_i, then per lane of
     ``N_LANES``, the route's lane first, its centre minus b_y and the room left (m). pvec = circles (C * 3,) as
     (x, y, r)."""
-    lo_y, hi_y = np.inf, -np.inf
-    for j in range(pos.shape[1]):
-        lo_y, hi_y = min(lo_y, pos[b, j, 1]), max(hi_y, pos[b, j, 1])
-    half = 0.5 * (hi_y - lo_y) + radius
+    half = team_half_height(pos[b], radius)
     x_near, x_far, lane_lo, lane_hi = route_lanes(pvec[b], radius, pos[b], goal[b], bounds[0, 1], bounds[1, 1])
     no_room = -2.0 * (bounds[1, 1] - bounds[0, 1])
     for i, a in enumerate(leaders):

@@ -205,6 +205,76 @@ def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -
     np.testing.assert_allclose(phase_distance(eng, at_rest_on_goal), 0.0)
 
 
+def _rest_time_one(e: float, v: float, a: float) -> float:
+    """Brute-force oracle of the least time (s) to stand on the goal from position error e = goal - x and velocity
+    v, |u| <= a: every one-switch bang-bang (accelerate s a for t1, then -s a until at rest, s = +-1) that ends
+    on the goal, from the roots of its quadratic in t1; the shortest wins."""
+    x, best = -e, np.inf
+    for sgn in (1.0, -1.0):
+        sa = sgn * a  # x + v t1 + sa t1^2 / 2 + (v + sa t1)^2 / (2 sa) = 0
+        for t1 in np.roots([sa, 2 * v, x + v * v / (2 * sa)]):
+            if abs(t1.imag) > 1e-9 or t1.real < -1e-12:
+                continue
+            t2 = (v + sa * t1.real) / sa
+            if t2 >= -1e-12:
+                best = min(best, t1.real + t2)
+    return best
+
+
+_rest_time = np.vectorize(_rest_time_one)
+
+
+def test_time_to_rest_is_the_bang_bang_time_and_falls_one_second_per_second_on_its_path() -> None:
+    """Against the brute-force oracle on a grid; along the bang-bang path T falls at rate 1 and the agent stands
+    on its goal when T reaches 0."""
+    from formation_env.env.rewards import time_to_rest
+
+    a = 1.5
+    for e in np.linspace(-3, 3, 13):
+        for v in np.linspace(-2.5, 2.5, 11):
+            assert time_to_rest(e, v, a) == pytest.approx(float(_rest_time(e, v, a)), rel=1e-9, abs=1e-12)
+    x0, v0 = -2.0, 1.7  # goal at 0 (error e = -x), moving towards it slower than it could: accelerate, then brake
+    t0 = time_to_rest(-x0, v0, a)
+    t1 = max(r.real for r in np.roots([a, 2 * v0, x0 + v0 * v0 / (2 * a)]) if abs(r.imag) < 1e-12)  # the switch
+    x1, v1 = x0 + v0 * t1 + 0.5 * a * t1 * t1, v0 + a * t1
+    assert t0 == pytest.approx(t1 + v1 / a, rel=1e-12)
+    for t in np.linspace(0.0, t0, 41):
+        if t <= t1:
+            x, v = x0 + v0 * t + 0.5 * a * t * t, v0 + a * t
+        else:
+            x, v = x1 + v1 * (t - t1) - 0.5 * a * (t - t1) ** 2, v1 - a * (t - t1)
+        assert time_to_rest(-x, v, a) == pytest.approx(t0 - t, abs=1e-6)
+    assert abs(x) < 1e-9 and abs(v) < 1e-9
+
+
+def test_time_to_go_term_is_a_potential_difference_of_the_teams_time_to_rest() -> None:
+    """Summed over steps it telescopes to the agents' mean of T_start - T_end (the slowest axis of each, the error
+    scaled to the route's length); it is refused for agents it does not model."""
+    from formation_env.core.errors import FormationError
+
+    off = {"progress": 0, "formation": 0, "effort": 0, "distance": 0, "collision": 0, "success": 0, "approach": 0}
+    for name in ("hold", "narrow_passage"):
+        eng = Engine(name, reward_weights={**off, "time_to_go": 1.0})
+        s0 = s = eng.reset(np.random.default_rng(5), 2)
+        rng = np.random.default_rng(6)
+        total = np.zeros((2, eng.n_l))
+        for _ in range(12):
+            s, _, r, *_ = eng.step(s, rng.uniform(-1, 1, (2, eng.n_l, eng.p)))
+            total += r
+
+        def team_time(st, eng=eng, pvec=s0.params["_pvec"]):
+            g = route_lengths(eng.scenario.route_row, pvec, eng.agent_radius, st.pos, st.goal)
+            err = st.goal - st.pos
+            err = err * (g / np.linalg.norm(err, axis=-1))[..., None]
+            return _rest_time(err, st.vel - st.goal_vel, eng.u_max).max(axis=-1).mean(axis=-1)
+
+        expect = team_time(s0) - team_time(s)
+        assert np.all(np.abs(expect) > 0.05)  # the team moved
+        np.testing.assert_allclose(total, np.broadcast_to(expect[:, None], total.shape), rtol=1e-9)
+    with pytest.raises(FormationError, match=r"time_to_go.*double_integrator"):
+        Engine("hold", dynamics="single_integrator", reward_weights={"time_to_go": 1.0})
+
+
 def test_route_progress_telescopes_to_each_leaders_route_length_gained() -> None:
     """Summed over steps, ``route_progress`` is each leader's route length at the start minus at the end (through
     the gap on ``narrow_passage``), and on a straight route it equals ``progress``."""

@@ -250,6 +250,13 @@ class Engine:
         self.affine = AffineImage(fw.positions)
         self._pinv = np.ascontiguousarray(self.affine._pinv)  # (d + 1, n)
         self.v_bound: float = max(float(max_speed), self.u_max if self.kind == "single_integrator" else 0.0)
+        for term, weight in self.reward_weights.items():
+            kinds = TERMS[term].kinds
+            if weight != 0.0 and kinds is not None and self.kind not in kinds:
+                raise FormationError(
+                    f"reward_weights[{term!r}] is defined for {' and '.join(kinds)} agents only, not {self.kind} "
+                    "ones: give it weight 0"
+                )
         self.bounds: Array = self.scenario.bounds
         self.n_rays: int = int(n_rays)
         self.n_nearest: int = int(n_nearest)

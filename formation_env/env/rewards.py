@@ -36,21 +36,25 @@ class RewardTerm:
     weight: float
     row: Any
     meaning: str
+    #: The agent kinds (``Engine.kind``) the term is defined for; None: every kind.
+    kinds: tuple[str, ...] | None = None
 
 
 #: Every registered term, by name.
 TERMS: dict[str, RewardTerm] = {}
 
 
-def reward_term(name: str, weight: float, meaning: str) -> Callable[[Callable[..., None]], Any]:
-    """Register the decorated row function as reward term ``name`` with default ``weight``; the function
-    becomes its compiled row."""
+def reward_term(
+    name: str, weight: float, meaning: str, kinds: tuple[str, ...] | None = None
+) -> Callable[[Callable[..., None]], Any]:
+    """Register the decorated row function as reward term ``name`` with default ``weight`` (defined for the agent
+    ``kinds`` given, or every kind); the function becomes its compiled row."""
 
     def add(fn: Callable[..., None]) -> Any:
         if name in TERMS:
             raise ValueError(f"reward term {name!r} is registered already")
         row = jit(fn)
-        TERMS[name] = RewardTerm(name, float(weight), row, meaning)
+        TERMS[name] = RewardTerm(name, float(weight), row, meaning, kinds)
         return row
 
     return add
@@ -110,6 +114,74 @@ def _approach(  # pragma: no cover
         acc += math.log(EPS_APPROACH + p0) - math.log(EPS_APPROACH + p1)
     for i in range(out.shape[0]):
         out[i] += w * acc / n
+
+
+@jit
+def time_to_rest(e: float, v: float, a: float) -> float:  # pragma: no cover
+    """The least time (s) in which a double integrator x'' = u, |u| <= a (m/s^2), at position error e = goal - x
+    (m) and velocity v (m/s, relative to the goal's) can stand on its goal: bang-bang with one switch. Above the
+    switching curve x + v |v| / (2 a) = 0 (x = -e) it brakes first, T = (v + 2 sqrt(v^2 / 2 + a x)) / a; below
+    it, T = (-v + 2 sqrt(v^2 / 2 - a x)) / a; on it, |v| / a."""
+    x = -e
+    s = x + v * abs(v) / (2.0 * a)
+    if s > 0.0:
+        return (v + 2.0 * math.sqrt(0.5 * v * v + a * x)) / a
+    if s < 0.0:
+        return (-v + 2.0 * math.sqrt(max(0.5 * v * v - a * x, 0.0))) / a
+    return abs(v) / a
+
+
+@jit
+def _team_time(
+    b: int, u_max: float, pos: Array, vel: Array, goal: Array, gvel: Array, route: Array
+) -> float:  # pragma: no cover
+    """The team's mean over agents of each agent's time to stand on its goal (s): the slowest axis's
+    :func:`time_to_rest`, the position error being goal - pos scaled to the agent's route length."""
+    n, d = pos.shape[1], pos.shape[2]
+    acc = 0.0
+    for i in range(n):
+        straight = 0.0
+        for k in range(d):
+            straight += (goal[b, i, k] - pos[b, i, k]) ** 2
+        straight = math.sqrt(straight)
+        scale = route[b, i] / straight if straight > 1e-12 else 1.0
+        worst = 0.0
+        for k in range(d):
+            e, v = scale * (goal[b, i, k] - pos[b, i, k]), vel[b, i, k] - gvel[b, i, k]
+            worst = max(worst, time_to_rest(e, v, u_max))
+        acc += worst
+    return acc / n
+
+
+@reward_term(
+    "time_to_go",
+    0.0,
+    "mean over all agents of T_i(k) - T_i(k+1) (s), T_i the least time in which the agent, a double integrator "
+    "with |u_j| <= u_max per axis, could stand on its goal (bang-bang, the slowest axis; the error to its goal "
+    "scaled to its route's length, the goal's velocity as the one to match, the speed cap ignored); shared by "
+    "the team: a potential that pays full speed towards the goal and braking at the last moment, where "
+    "``approach`` pays speed as it pays distance",
+    kinds=("double_integrator",),
+)
+def _time_to_go(  # pragma: no cover
+    b: int,
+    out: Array,
+    w: float,
+    u_max: float,
+    pos0: Array,
+    vel0: Array,
+    goal0: Array,
+    gvel0: Array,
+    route0: Array,
+    pos: Array,
+    vel: Array,
+    goal: Array,
+    gvel: Array,
+    route1: Array,
+) -> None:
+    gain = _team_time(b, u_max, pos0, vel0, goal0, gvel0, route0) - _team_time(b, u_max, pos, vel, goal, gvel, route1)
+    for i in range(out.shape[0]):
+        out[i] += w * gain
 
 
 @reward_term("formation", 1.0, "-T e(k+1): the affine-image formation error, per second (m s)")

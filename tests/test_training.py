@@ -186,6 +186,18 @@ def test_tolerance_reward_term_pays_while_the_success_test_holds() -> None:
     np.testing.assert_allclose(r_start, 0.0)
 
 
+def _summed_rewards(eng: Engine, B: int, steps: int, seed: int):
+    """A reset of B envs from ``seed`` and ``steps`` steps of uniform random actions (drawn from ``seed`` + 1): the
+    reset's state, the last state and each leader's reward summed over the steps (B, n_l)."""
+    s0 = s = eng.reset(np.random.default_rng(seed), B)
+    rng = np.random.default_rng(seed + 1)
+    total = np.zeros((B, eng.n_l))
+    for _ in range(steps):
+        s, _, r, *_ = eng.step(s, rng.uniform(-1, 1, (B, eng.n_l, eng.p)))
+        total += r
+    return s0, s, total
+
+
 def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -> None:
     """Summed over steps it telescopes to the agents' mean of log(eps + s_start) - log(eps + s_end)."""
     from oracle import phase_distance
@@ -193,12 +205,7 @@ def test_approach_term_is_a_potential_difference_of_the_phase_space_distance() -
     from formation_env.env.rewards import EPS_APPROACH
 
     eng = Engine("hold", reward_weights={"approach": 1.0, "progress": 0, "formation": 0, "effort": 0, "distance": 0})
-    s0 = s = eng.reset(np.random.default_rng(1), 1)
-    rng = np.random.default_rng(2)
-    total = np.zeros((1, eng.n_l))  # the team's term, the same for every leader
-    for _ in range(20):
-        s, _, r, *_ = eng.step(s, rng.uniform(-1, 1, (1, eng.n_l, eng.p)))
-        total += r
+    s0, s, total = _summed_rewards(eng, 1, 20, seed=1)  # the team's term, the same for every leader
     expect = np.log(EPS_APPROACH + phase_distance(eng, s0)) - np.log(EPS_APPROACH + phase_distance(eng, s))
     np.testing.assert_allclose(total, np.broadcast_to(expect.mean(axis=1, keepdims=True), total.shape), rtol=1e-9)
     at_rest_on_goal = s0._replace(pos=s0.goal, vel=np.zeros_like(s0.vel))
@@ -255,12 +262,7 @@ def test_time_to_go_term_is_a_potential_difference_of_the_teams_time_to_rest() -
     off = {"progress": 0, "formation": 0, "effort": 0, "distance": 0, "collision": 0, "success": 0, "approach": 0}
     for name in ("hold", "narrow_passage"):
         eng = Engine(name, reward_weights={**off, "time_to_go": 1.0})
-        s0 = s = eng.reset(np.random.default_rng(5), 2)
-        rng = np.random.default_rng(6)
-        total = np.zeros((2, eng.n_l))
-        for _ in range(12):
-            s, _, r, *_ = eng.step(s, rng.uniform(-1, 1, (2, eng.n_l, eng.p)))
-            total += r
+        s0, s, total = _summed_rewards(eng, 2, 12, seed=5)
 
         def team_time(st, eng=eng, pvec=s0.params["_pvec"]):
             g = route_lengths(eng.scenario.route_row, pvec, eng.agent_radius, st.pos, st.goal)
@@ -281,12 +283,7 @@ def test_route_progress_telescopes_to_each_leaders_route_length_gained() -> None
     off = {"progress": 0, "formation": 0, "effort": 0, "distance": 0, "collision": 0, "success": 0}
     for name in ("narrow_passage", "hold"):
         eng = Engine(name, reward_weights={**off, "route_progress": 1.0})
-        s0 = s = eng.reset(np.random.default_rng(3), 2)
-        rng = np.random.default_rng(4)
-        total = np.zeros((2, eng.n_l))
-        for _ in range(15):
-            s, _, r, *_ = eng.step(s, rng.uniform(-1, 1, (2, eng.n_l, eng.p)))
-            total += r
+        s0, s, total = _summed_rewards(eng, 2, 15, seed=3)
         pvec = s0.params["_pvec"]
 
         def route(st, pvec=pvec, eng=eng):
@@ -296,7 +293,7 @@ def test_route_progress_telescopes_to_each_leaders_route_length_gained() -> None
         if name == "hold":
             straight = Engine(name, reward_weights={**off, "progress": 1.0})
             s = straight.reset(np.random.default_rng(3), 2)
-            a = rng.uniform(-1, 1, (2, eng.n_l, eng.p))
+            a = np.random.default_rng(4).uniform(-1, 1, (2, eng.n_l, eng.p))
             np.testing.assert_allclose(straight.step(s, a)[2], eng.step(s, a)[2], rtol=1e-12)
         else:
             assert not np.allclose(route(s0), np.linalg.norm(s0.goal - s0.pos, axis=-1)[:, eng.leaders])

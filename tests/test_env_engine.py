@@ -22,6 +22,7 @@ from formation_env.env import config, obstacles
 from formation_env.env.engine import INFO_KEYS, Engine, offered_combinations
 from formation_env.env.obstacles import Capsules, MovingCircle
 from formation_env.env.scenarios import REGISTRY
+from formation_env.env.scenarios._base import Draw, DrawPlan
 
 SCENARIOS = sorted(REGISTRY)
 COMBOS = offered_combinations()
@@ -121,6 +122,39 @@ def test_moving_circles_bounce_inside_the_box():
     np.testing.assert_allclose(mc.capsules(disc, np.array([1.0]), bounds).a[0, 0], [0.0, 4.0])  # 4 -> 4.5, back to 4
     vel = mc.velocity(p, np.array([1.0]), bounds)[0, 0]
     np.testing.assert_allclose(vel, [0.3, -1.0])  # after the bounce off y = 4.5
+
+
+def test_draw_each_equals_one_draw_per_generator_bit_for_bit():
+    """Runs of uniform draws are one generator call per episode: every entry and every generator's next number
+    equal those of ``draw(rng, 1)`` (a degenerate range, normal and sign draws break or do not break a run)."""
+    plan = DrawPlan([
+        Draw("a", (3,), bounds=(-2.0, 0.5)), Draw("c", (2,), bounds=(1.5, 1.5)),
+        Draw("b", bounds=(-np.pi / 12, np.pi / 12)), Draw("s", (2,), "sign"),
+        Draw("e", (2, 2), bounds=(0.0, 4.0)), Draw("n", (2, 3), "normal"), Draw("u", (2,)),
+    ])  # fmt: skip
+    assert [(k, [d.name for d, _, _ in run]) for k, _, run in plan._runs] == [
+        ("constant", ["c"]), ("uniform", ["a", "b"]), ("sign", ["s"]), ("uniform", ["e"]), ("normal", ["n"]),
+        ("uniform", ["u"]),
+    ]  # fmt: skip
+    each = plan.draw_each([np.random.default_rng(s) for s in range(50)])
+    for b in range(50):
+        g = np.random.default_rng(b)
+        one = plan.draw(g, 1)
+        for name, arr in one.items():
+            assert each[name].shape == (50, *arr.shape[1:]) and np.array_equal(each[name][b], arr[0]), name
+    after = [np.random.default_rng(s) for s in range(3)]
+    plan.draw_each(after)
+    for s, g in enumerate(after):
+        ref = np.random.default_rng(s)
+        plan.draw(ref, 1)
+        assert g.random() == ref.random()
+    for name in SCENARIOS:
+        sc = Engine(name).scenario
+        rngs = [np.random.default_rng(s) for s in range(6)]
+        batch = sc._plan.draw_each(rngs)
+        for b in range(6):
+            one = sc._plan.draw(np.random.default_rng(b), 1)
+            assert all(np.array_equal(batch[k][b], one[k][0]) for k in one), name
 
 
 @pytest.mark.parametrize("scenario", SCENARIOS)

@@ -272,6 +272,11 @@ class Scenario:
         return list(self._noise_plan.draws)
 
     @functools.cached_property
+    def _pairs(self) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Every pair of agents i < j, as two index arrays (n (n - 1) / 2,)."""
+        return np.triu_indices(self.fw.n, 1)
+
+    @functools.cached_property
     def _plan(self) -> DrawPlan:
         return DrawPlan(self.draws())
 
@@ -297,7 +302,7 @@ class Scenario:
 
             ok = np.array([not cKDTree(t).query_pairs(gap3, output_type="ndarray").size for t in trial], dtype=bool)
         else:
-            iu, ju = np.triu_indices(self.fw.n, 1)
+            iu, ju = self._pairs
             diff = trial[:, iu] - trial[:, ju]
             ok = np.sqrt(np.sum(diff * diff, axis=-1).min(axis=1, initial=np.inf)) >= gap3
         out[todo[ok]] = trial[ok]
@@ -406,6 +411,43 @@ class DrawPlan:
         return out
 
     def draw_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
-        """One episode per generator (its own stream, as a single reset draws it), stacked along B."""
-        each = [self.draw(g, 1) for g in rngs]
-        return {dr.name: np.concatenate([e[dr.name] for e in each]) for dr in self.draws}
+        """One episode per generator (its own stream, as a single reset draws it), stacked along B. A run of
+        consecutive uniform draws is one ``random`` call per generator, scaled as ``Generator.uniform`` scales its
+        doubles (lo + (hi - lo) u), so every entry equals ``draw(rngs[b], 1)``'s bit for bit."""
+        B = len(rngs)
+        out: dict[str, Array] = {}
+        for kind, total, run in self._runs:
+            if kind == "uniform":
+                u = np.empty((B, total))
+                for b, g in enumerate(rngs):
+                    g.random(out=u[b])
+                for dr, at, size in run:
+                    lo, hi = dr.bounds
+                    out[dr.name] = lo + (hi - lo) * u[:, at : at + size].reshape(B, *dr.shape)
+                continue
+            dr = run[0][0]
+            if kind == "constant":
+                out[dr.name] = np.full((B, *dr.shape), float(dr.bounds[0]))
+            else:
+                arr = out[dr.name] = np.empty((B, *dr.shape))
+                for b, g in enumerate(rngs):
+                    arr[b] = g.normal(size=dr.shape) if kind == "normal" else g.choice([-1.0, 1.0], size=dr.shape)
+        return out
+
+    @functools.cached_property
+    def _runs(self) -> list[tuple[str, int, list[tuple[Draw, int, int]]]]:
+        """The draws in order as (kind, numbers drawn, [(draw, offset, size)]): consecutive uniform draws joined
+        into one run (a degenerate range is a "constant", which draws nothing and does not break a run); every
+        other draw alone."""
+        runs: list[tuple[str, int, list[tuple[Draw, int, int]]]] = []
+        for dr in self.draws:
+            size = int(np.prod(dr.shape, dtype=np.int64))
+            kind = "constant" if dr.kind == "uniform" and not dr.bounds[1] > dr.bounds[0] else dr.kind
+            if kind == "uniform" and runs and runs[-1][0] == "uniform":
+                _, total, run = runs[-1]
+                runs[-1] = ("uniform", total + size, [*run, (dr, total, size)])
+            elif kind == "constant":
+                runs.insert(len(runs) - (bool(runs) and runs[-1][0] == "uniform"), (kind, 0, [(dr, 0, size)]))
+            else:
+                runs.append((kind, size if kind == "uniform" else 0, [(dr, 0, size)]))
+        return runs

@@ -399,55 +399,54 @@ class DrawPlan:
 
     def draw(self, rng: np.random.Generator, B: int) -> dict[str, Array]:
         """One generator call per draw, each for all B episodes."""
-        out: dict[str, Array] = {}
-        for dr in self.draws:
-            size = (B, *dr.shape)
-            if dr.kind == "uniform":
-                out[dr.name] = uniform(rng, dr.bounds, size)
-            elif dr.kind == "normal":
-                out[dr.name] = rng.normal(size=size)
-            else:
-                out[dr.name] = rng.choice([-1.0, 1.0], size=size)
-        return out
+        return {dr.name: _sample(rng, dr, (B, *dr.shape)) for dr in self.draws}
 
     def draw_each(self, rngs: Sequence[np.random.Generator]) -> dict[str, Array]:
         """One episode per generator (its own stream, as a single reset draws it), stacked along B. A run of
         consecutive uniform draws is one ``random`` call per generator, scaled as ``Generator.uniform`` scales its
         doubles (lo + (hi - lo) u), so every entry equals ``draw(rngs[b], 1)``'s bit for bit."""
         B = len(rngs)
-        out: dict[str, Array] = {}
-        for kind, total, run in self._runs:
-            if kind == "uniform":
-                u = np.empty((B, total))
+        out = {dr.name: np.full((B, *dr.shape), float(dr.bounds[0])) for dr in self.draws if not _draws_numbers(dr)}
+        for run, cols in self._runs:
+            if run[0].kind == "uniform":
+                u = np.empty((B, cols[-1].stop))
                 for b, g in enumerate(rngs):
                     g.random(out=u[b])
-                for dr, at, size in run:
+                for dr, col in zip(run, cols, strict=True):
                     lo, hi = dr.bounds
-                    out[dr.name] = lo + (hi - lo) * u[:, at : at + size].reshape(B, *dr.shape)
-                continue
-            dr = run[0][0]
-            if kind == "constant":
-                out[dr.name] = np.full((B, *dr.shape), float(dr.bounds[0]))
+                    out[dr.name] = lo + (hi - lo) * u[:, col].reshape(B, *dr.shape)
             else:
-                arr = out[dr.name] = np.empty((B, *dr.shape))
-                for b, g in enumerate(rngs):
-                    arr[b] = g.normal(size=dr.shape) if kind == "normal" else g.choice([-1.0, 1.0], size=dr.shape)
-        return out
+                (dr,) = run
+                out[dr.name] = np.stack([_sample(g, dr, dr.shape) for g in rngs])
+        return {dr.name: out[dr.name] for dr in self.draws}
 
     @functools.cached_property
-    def _runs(self) -> list[tuple[str, int, list[tuple[Draw, int, int]]]]:
-        """The draws in order as (kind, numbers drawn, [(draw, offset, size)]): consecutive uniform draws joined
-        into one run (a degenerate range is a "constant", which draws nothing and does not break a run); every
-        other draw alone."""
-        runs: list[tuple[str, int, list[tuple[Draw, int, int]]]] = []
-        for dr in self.draws:
+    def _runs(self) -> list[tuple[list[Draw], list[slice]]]:
+        """The draws that take numbers from the generator, in order, with each one's columns among its run's numbers:
+        consecutive uniform draws joined into one run (a degenerate range draws nothing, so it does not break a
+        run), every other draw a run of its own."""
+        runs: list[tuple[list[Draw], list[slice]]] = []
+        for dr in filter(_draws_numbers, self.draws):
             size = int(np.prod(dr.shape, dtype=np.int64))
-            kind = "constant" if dr.kind == "uniform" and not dr.bounds[1] > dr.bounds[0] else dr.kind
-            if kind == "uniform" and runs and runs[-1][0] == "uniform":
-                _, total, run = runs[-1]
-                runs[-1] = ("uniform", total + size, [*run, (dr, total, size)])
-            elif kind == "constant":
-                runs.insert(len(runs) - (bool(runs) and runs[-1][0] == "uniform"), (kind, 0, [(dr, 0, size)]))
+            if dr.kind == "uniform" and runs and runs[-1][0][0].kind == "uniform":
+                run, cols = runs[-1]
+                run.append(dr)
+                cols.append(slice(cols[-1].stop, cols[-1].stop + size))
             else:
-                runs.append((kind, size if kind == "uniform" else 0, [(dr, 0, size)]))
+                runs.append(([dr], [slice(0, size)]))
         return runs
+
+
+def _draws_numbers(dr: Draw) -> bool:
+    """Whether ``dr`` takes numbers from the generator (a uniform draw of a degenerate range does not, as
+    :func:`uniform`)."""
+    return dr.kind != "uniform" or dr.bounds[1] > dr.bounds[0]
+
+
+def _sample(rng: np.random.Generator, dr: Draw, size: tuple[int, ...]) -> Array:
+    """The numbers of draw ``dr`` in an array of shape ``size``, from ``rng`` (the one rule of :class:`Draw`)."""
+    if dr.kind == "uniform":
+        return uniform(rng, dr.bounds, size)
+    if dr.kind == "normal":
+        return rng.normal(size=size)
+    return rng.choice([-1.0, 1.0], size=size)

@@ -10,6 +10,7 @@ import pytest
 from oracle import route_lengths
 
 from agents.policy import LearnedPolicy, load_policy
+from formation_env.core.errors import FormationError
 from formation_env.env.engine import Engine
 from train.evaluate import METRIC_KEYS, evaluate, reset_paired
 from train.leaders import train
@@ -398,7 +399,9 @@ def test_range_curriculum_moves_the_draws_to_the_scenarios_ranges() -> None:
         RangeCurriculum.from_recipe(eng, {"strat": {}, "fraction": 0.5}, 1000)
 
 
-@pytest.mark.parametrize("flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum"])
+@pytest.mark.parametrize(
+    "flag", ["--env-kwargs", "--algo-kwargs", "--policy-kwargs", "--range-curriculum", "--reward-curriculum"]
+)
 def test_json_flags_refuse_what_is_not_a_json_object(flag: str, capsys) -> None:
     from train.leaders import main as leaders_main
 
@@ -553,3 +556,39 @@ def test_noise_gap_reports_the_noise_and_both_ways_of_acting(tmp_path: Path) -> 
     m = evaluate(path, None, 3, seed=5, generalisation=False)["metrics"]
     assert gap["deterministic"] == {k: m[k] for k in ("success_rate", "collision_rate")}
     assert noise_gap(path, 3, seed=5)["sampled"] == gap["sampled"]
+
+
+def test_reward_curriculum_moves_the_compiled_steps_weights() -> None:
+    """A weight set during training pays exactly what an engine built with it pays, with no recompilation."""
+    from train.leaders import RewardCurriculum
+
+    def rewards(eng: Engine) -> np.ndarray:
+        state = eng.reset(np.random.default_rng(3), 8)
+        a = np.random.default_rng(4).uniform(-1.0, 1.0, (8, eng.n_l, eng.p))
+        return eng.advance(state, a)[2]
+
+    weights = {"distance": 2.0, "collision": 40.0}
+    eng = Engine("hold", reward_weights=weights)
+    module = eng._compose()[1]
+    cur = RewardCurriculum(eng, {"distance": 0.5}, fraction=0.5, total=1000, begin=0.2)
+    for t, w in ((0, 0.5), (200, 0.5), (350, 1.25), (500, 2.0), (900, 2.0)):
+        cur.num_timesteps = t
+        cur._on_step()
+        assert eng.reward_weights["distance"] == pytest.approx(w)
+        built = Engine("hold", reward_weights={**weights, "distance": w})
+        np.testing.assert_allclose(rewards(eng), rewards(built), rtol=1e-12, atol=1e-12)
+    assert eng._compose()[1] is module  # the same compiled step throughout
+    cur.num_timesteps = 0
+    cur._on_step()
+    cur._on_training_end()
+    assert eng.reward_weights["distance"] == 2.0
+    with pytest.raises(ValueError, match="'proximity' has weight 0"):
+        RewardCurriculum(eng, {"proximity": 1.0}, 0.5, 10)
+    with pytest.raises(ValueError, match=r"start\['collision'\] must be a finite number"):
+        RewardCurriculum(eng, {"collision": float("nan")}, 0.5, 10)
+    with pytest.raises(ValueError, match="give start, fraction"):
+        RewardCurriculum.from_recipe(eng, {"start": {"collision": 10.0}}, 10)
+    with pytest.raises(FormationError, match="had weight 0 at construction"):
+        eng.set_reward_weights({"proximity": 1.0})
+    with pytest.raises(TypeError, match="unknown reward term 'colision'"):
+        eng.set_reward_weights({"colision": 1.0})

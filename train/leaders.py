@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import os
 import re
 import shlex
@@ -88,7 +89,7 @@ SMOKE_OVERRIDES: dict[str, dict[str, Any]] = {
 CONFIG_KEYS = (
     "algo", "mode", "scenario", "timesteps", "seed", "n_envs", "residual", "env_kwargs", "eval_episodes",
     "curriculum", "algo_kwargs", "policy_kwargs", "env_version", "range_curriculum", "action_mode", "central_critic",
-    "checkpoints", "threads", "obs_norm",
+    "checkpoints", "threads", "obs_norm", "reward_curriculum",
 )  # fmt: skip
 #: How the observations are normalised: SB3's running mean and deviation, or each entry's declared bounds mapped
 #: onto [-1, 1] (:class:`agents.normalization.FixedMeanStd`; what a curriculum on episode draws needs).
@@ -347,7 +348,43 @@ class ToleranceCurriculum(BaseCallback):
         self.scenario.goal_tol, self.scenario.formation_tol = self.final
 
 
-class RangeCurriculum(BaseCallback):
+class _LinearSchedule(BaseCallback):
+    """Values that start at ``start``, stay there until ``begin`` of the training timesteps (a fraction, default
+    0) and move linearly to their final values until ``fraction`` of them (``_set(left)``: left = 1 at the start
+    values, 0 at the final ones); the final values hold from then on and after training."""
+
+    kind = "schedule"
+
+    def __init__(self, engine: Any, start: dict[str, Any], fraction: float, total: int, begin: float = 0.0) -> None:
+        super().__init__()
+        if not 0.0 < fraction <= 1.0:
+            raise ValueError(f"{self.kind}: fraction must be in (0, 1], got {fraction}")
+        if not 0.0 <= begin < fraction:
+            raise ValueError(f"{self.kind}: begin must be in [0, fraction) = [0, {fraction}), got {begin}")
+        self.first = int(begin * total)
+        self.span = max(1, int(fraction * total) - self.first)
+
+    @classmethod
+    def from_recipe(cls, engine: Any, recipe: dict[str, Any], total: int) -> _LinearSchedule:
+        """From a recipe's mapping: ``start``, ``fraction`` and optionally ``begin``."""
+        if set(recipe) - {"start", "fraction", "begin"} or not {"start", "fraction"} <= set(recipe):
+            raise ValueError(f"{cls.kind}: give start, fraction and optionally begin, got {sorted(recipe)}")
+        if not isinstance(recipe["start"], dict):
+            raise ValueError(f"{cls.kind}: start must be a mapping, got {recipe['start']!r}")
+        return cls(engine, recipe["start"], float(recipe["fraction"]), total, float(recipe.get("begin", 0.0)))
+
+    def _set(self, left: float) -> None:
+        raise NotImplementedError
+
+    def _on_step(self) -> bool:
+        self._set(min(1.0, max(0.0, 1.0 - (self.num_timesteps - self.first) / self.span)))
+        return True
+
+    def _on_training_end(self) -> None:
+        self._set(0.0)
+
+
+class RangeCurriculum(_LinearSchedule):
     """A curriculum on a scenario's episode draws: each named range (e.g. ``gap_width``) starts at the given
     (lo, hi), stays there until ``begin`` of the training timesteps (a fraction, default 0) and moves linearly
     to the scenario's own until ``fraction`` of them, in the one engine of the ``FormationVecEnv``. Evaluation
@@ -357,29 +394,18 @@ class RangeCurriculum(BaseCallback):
     seen clipped.
     """
 
+    kind = "range curriculum"
+
     def __init__(
         self, engine: Any, start: dict[str, Sequence[float]], fraction: float, total: int, begin: float = 0.0
     ) -> None:
-        super().__init__()
-        if not 0.0 < fraction <= 1.0:
-            raise ValueError(f"range curriculum: fraction must be in (0, 1], got {fraction}")
-        if not 0.0 <= begin < fraction:
-            raise ValueError(f"range curriculum: begin must be in [0, fraction) = [0, {fraction}), got {begin}")
+        super().__init__(engine, start, fraction, total, begin)
         self.scenario = sc = engine.scenario
         for key, rng in start.items():
             if not isinstance(getattr(sc, key, None), tuple) or len(rng) != 2:
                 raise ValueError(f"range curriculum: {key!r} is not a (lo, hi) range of {sc.name!r}")
         self.final = {k: tuple(getattr(sc, k)) for k in start}
         self.start = {k: (float(v[0]), float(v[1])) for k, v in start.items()}
-        self.first = int(begin * total)
-        self.span = max(1, int(fraction * total) - self.first)
-
-    @classmethod
-    def from_recipe(cls, engine: Any, recipe: dict[str, Any], total: int) -> RangeCurriculum:
-        """From a recipe's ``range_curriculum`` mapping: ``start``, ``fraction`` and optionally ``begin``."""
-        if set(recipe) - {"start", "fraction", "begin"} or not {"start", "fraction"} <= set(recipe):
-            raise ValueError(f"range curriculum: give start, fraction and optionally begin, got {sorted(recipe)}")
-        return cls(engine, recipe["start"], float(recipe["fraction"]), total, float(recipe.get("begin", 0.0)))
 
     def _set(self, left: float) -> None:
         for k, (a0, a1) in self.start.items():
@@ -387,12 +413,33 @@ class RangeCurriculum(BaseCallback):
             setattr(self.scenario, k, (b0 + left * (a0 - b0), b1 + left * (a1 - b1)))
             self.scenario.__dict__.pop("_plan", None)  # the draws read the ranges when the plan is built
 
-    def _on_step(self) -> bool:
-        self._set(min(1.0, max(0.0, 1.0 - (self.num_timesteps - self.first) / self.span)))
-        return True
 
-    def _on_training_end(self) -> None:
-        self._set(0.0)
+class RewardCurriculum(_LinearSchedule):
+    """A curriculum on the reward: each named term's weight (e.g. ``collision``) starts at the given value,
+    stays there until ``begin`` of the training timesteps and moves linearly to the run's own weight (its
+    ``env_kwargs``' ``reward_weights`` over the scenario's) until ``fraction`` of them
+    (:meth:`~formation_env.env.engine.Engine.set_reward_weights`, no recompilation). A term must be nonzero in
+    the run's own weights, so that the compiled step computes it. Evaluation never sees the reward.
+    """
+
+    kind = "reward curriculum"
+
+    def __init__(self, engine: Any, start: dict[str, float], fraction: float, total: int, begin: float = 0.0) -> None:
+        super().__init__(engine, start, fraction, total, begin)
+        self.engine = engine
+        for key, val in start.items():
+            if engine.reward_weights.get(key, 0.0) == 0.0:
+                raise ValueError(
+                    f"reward curriculum: {key!r} has weight 0 in the run's reward_weights (or is not a term), so the "
+                    "compiled step does not compute it; give it its final weight there"
+                )
+            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
+                raise ValueError(f"reward curriculum: start[{key!r}] must be a finite number, got {val!r}")
+        self.final = {k: float(engine.reward_weights[k]) for k in start}
+        self.start = {k: float(v) for k, v in start.items()}
+
+    def _set(self, left: float) -> None:
+        self.engine.set_reward_weights({k: b + left * (self.start[k] - b) for k, b in self.final.items()})
 
 
 def plot_curve(rows: Sequence[tuple[int, float, float, float]], path: Path, title: str) -> Path:
@@ -446,6 +493,7 @@ def train(
     config_file: str | None = None,
     env_version: int = 0,
     range_curriculum: dict[str, Any] | None = None,
+    reward_curriculum: dict[str, Any] | None = None,
     action_mode: str = "leaders",
     central_critic: bool = False,
     checkpoints: int = 4,
@@ -472,6 +520,9 @@ def train(
         range_curriculum: ``{"start": {range name: [lo, hi]}, "fraction": f, "begin": b}``: those episode draws
             start at the given ranges, stay there until ``b`` of the timesteps (optional, default 0) and reach the
             scenario's own after ``f`` of them (:class:`RangeCurriculum`).
+        reward_curriculum: ``{"start": {term: weight}, "fraction": f, "begin": b}``: those reward weights start at
+            the given values, stay there until ``b`` of the timesteps and reach the run's own after ``f`` of them
+            (:class:`RewardCurriculum`).
         env_version: the env version whose defaults ``env_kwargs`` sit over (:mod:`formation_env.env.versions`;
             1 is ``formation_v1``).
         central_critic: (shared PPO) the critic reads the global state too, the actor only the leader's own
@@ -559,6 +610,8 @@ def train(
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:
         callbacks.append(RangeCurriculum.from_recipe(base.engine, range_curriculum, int(timesteps)))
+    if reward_curriculum is not None:
+        callbacks.append(RewardCurriculum.from_recipe(base.engine, reward_curriculum, int(timesteps)))
     model.learn(int(timesteps), callback=CallbackList(callbacks), progress_bar=progress_bar, tb_log_name=name)
     wall = time.time() - t0
     stem = out / name
@@ -577,6 +630,7 @@ def train(
         "residual": float(residual),
         "curriculum": None if curriculum is None else list(curriculum),
         "range_curriculum": range_curriculum,
+        "reward_curriculum": reward_curriculum,
         "env_version": int(env_version),
         "env_kwargs": env_kwargs,
         "observation": "global_state" if mode == "commander" else "leader_observation",
@@ -651,6 +705,11 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         help='episode-draw curriculum over the recipe\'s, e.g. {"start": {"gap_width": [2.4, 3.0]}, "fraction": 0.5}; '
         '"begin": b holds the start ranges until b of training',
     )  # fmt: skip
+    p.add_argument(
+        "--reward-curriculum", default="", metavar="JSON",
+        help='reward-weight curriculum over the recipe\'s, e.g. {"start": {"collision": 50.0}, "fraction": 0.5}: '
+        "those weights move linearly to the run's own",
+    )  # fmt: skip
     p.add_argument("--env-version", type=int, default=None, help="env version of the defaults (0, 1); default 0")
     p.add_argument(
         "--central-critic", action="store_true", default=None,
@@ -691,6 +750,8 @@ def parse_run(argv: Sequence[str] | None = None, prog: str = "python -m train.le
         cfg["policy_kwargs"] = {**cfg.get("policy_kwargs", {}), **_json_flag(p, "--policy-kwargs", a.policy_kwargs)}
     if a.range_curriculum:
         cfg["range_curriculum"] = _json_flag(p, "--range-curriculum", a.range_curriculum)
+    if a.reward_curriculum:
+        cfg["reward_curriculum"] = _json_flag(p, "--reward-curriculum", a.reward_curriculum)
     if a.curriculum:
         cur = tuple(float(v) for v in a.curriculum.split(":"))
         if len(cur) != 2:

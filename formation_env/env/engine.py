@@ -207,6 +207,8 @@ class Engine:
         self.scenario: Scenario = cls(fw, agent_radius=self.agent_radius, horizon=self.dt * self.max_cycles,
                                       **scenario_kwargs)  # fmt: skip
         self.reward_weights = self._weights(reward_weights)
+        #: The reward terms the compiled step computes (nonzero at construction), in the order of its weights.
+        self._terms = [name for name, w in self.reward_weights.items() if w != 0.0]
 
         n, d, q, p = fw.n, fw.d, dyn.q, dyn.p
         self.n: int = n
@@ -305,6 +307,28 @@ class Engine:
                     raise FormationError(f"reward_weights[{key!r}] must be finite, got {val}")
                 weights[key] = float(val)
         return weights
+
+    def set_reward_weights(self, weights: dict[str, float]) -> None:
+        """Change the weights of reward terms this engine composed (nonzero at construction), in place: the next
+        step pays the new weights, with no recompilation (a curriculum on the reward, e.g. a collision penalty
+        that grows during training). Terms with weight 0 at construction are not in the compiled step: giving one
+        a weight here is an error (construct the engine with it nonzero).
+
+        Args:
+            weights: ``{term: weight}``, each a finite number (0 switches a composed term off).
+        """
+        weights = check_mapping(weights, "weights")
+        new = self._weights(weights)
+        off = [k for k in weights if new[k] != 0.0 and k not in self._terms]
+        if off:
+            raise FormationError(
+                f"weights: reward term(s) {off} had weight 0 at construction, so the compiled step does not compute "
+                "them; construct the engine with them nonzero (reward_weights) to schedule them"
+            )
+        for key in weights:
+            self.reward_weights[key] = new[key]
+        if self._compiled is not None:
+            self._compiled[0][:] = [self.reward_weights[t] for t in self._terms]
 
     def _build_state_bounds(self) -> None:
         n, d = self.n, self.d
@@ -425,7 +449,7 @@ class Engine:
                 return [(blk.name, blk.row if blk.name != "task" else sc.task_row, obs.slices[blk.name].start)
                         for blk in obs.blocks]  # fmt: skip
 
-            terms = [name for name, w in self.reward_weights.items() if w != 0.0]
+            terms = self._terms
             moving = [ob.row for ob in self._moving]
             mod = compose(blocks(self.observer), [(t, TERMS[t].row) for t in terms], sc.route_row, moving, sc.pose_row,
                           network=self._net is not None, timed=self._timed)  # fmt: skip

@@ -48,8 +48,10 @@ def test_end_of_training_evaluation_takes_the_env_kwargs_that_change_the_state(t
     ``load_policy`` without an env act on that framework; a training-only argument (the reward) is not carried."""
     kw = {"framework": "bipyramid_3d", "reward_weights": {"distance": 0.2}}
     cfg = train("ppo", "commander", "hold", 256, seed=0, out=tmp_path, smoke=True, n_envs=2, env_kwargs=kw,
-                eval_episodes=1, algo_kwargs={"n_steps": 32}, policy_kwargs={"net_arch": [8, 8]})  # fmt: skip
+                eval_episodes=1, algo_kwargs={"n_steps": 32}, policy_kwargs={"net_arch": [8, 8]},
+                reward_curriculum={"start": {"distance": 1.0}, "fraction": 0.5})  # fmt: skip
     assert cfg["eval"]["episodes"] == 1 and set(cfg["eval"]["metrics"]) == set(METRIC_KEYS)
+    assert cfg["reward_curriculum"] == {"start": {"distance": 1.0}, "fraction": 0.5}
     pol = load_policy(tmp_path / "hold_commander.zip")
     assert pol.scenario == "hold" and pol.env_kwargs == {"framework": "bipyramid_3d"}
     assert (pol.engine.n, pol.engine.d) == (6, 3)
@@ -588,6 +590,13 @@ def test_reward_curriculum_moves_the_compiled_steps_weights() -> None:
         RewardCurriculum(eng, {"collision": float("nan")}, 0.5, 10)
     with pytest.raises(ValueError, match="give start, fraction"):
         RewardCurriculum.from_recipe(eng, {"start": {"collision": 10.0}}, 10)
+    from train.leaders import parse_run
+
+    flag = '{"start": {"collision": 50.0}, "fraction": 0.5}'
+    assert parse_run(["--reward-curriculum", flag])["reward_curriculum"] == {
+        "start": {"collision": 50.0},
+        "fraction": 0.5,
+    }
     with pytest.raises(FormationError, match="had weight 0 at construction"):
         eng.set_reward_weights({"proximity": 1.0})
     with pytest.raises(TypeError, match="unknown reward term 'colision'"):

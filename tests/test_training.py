@@ -573,6 +573,7 @@ def test_reward_curriculum_moves_the_compiled_steps_weights() -> None:
     eng = Engine("hold", reward_weights=weights)
     module = eng._compose()[1]
     cur = RewardCurriculum(eng, {"distance": 0.5}, fraction=0.5, total=1000, begin=0.2)
+    assert eng.reward_weights["distance"] == 0.5  # from the first step of training
     for t, w in ((0, 0.5), (200, 0.5), (350, 1.25), (500, 2.0), (900, 2.0)):
         cur.num_timesteps = t
         cur._on_step()
@@ -584,10 +585,11 @@ def test_reward_curriculum_moves_the_compiled_steps_weights() -> None:
     cur._on_step()
     cur._on_training_end()
     assert eng.reward_weights["distance"] == 2.0
-    with pytest.raises(ValueError, match="'proximity' has weight 0"):
+    with pytest.raises(FormationError, match=r"\['proximity'\] had weight 0 at construction"):
         RewardCurriculum(eng, {"proximity": 1.0}, 0.5, 10)
-    with pytest.raises(ValueError, match=r"start\['collision'\] must be a finite number"):
-        RewardCurriculum(eng, {"collision": float("nan")}, 0.5, 10)
+    with pytest.raises(FormationError, match=r"^weights\['collision'\] must be finite"):
+        RewardCurriculum(eng, {"collision": float("nan"), "distance": 1.0}, 0.5, 10)
+    assert eng.reward_weights["distance"] == 2.0  # a refused curriculum changes nothing
     with pytest.raises(ValueError, match="give start, fraction"):
         RewardCurriculum.from_recipe(eng, {"start": {"collision": 10.0}}, 10)
     from train.leaders import parse_run

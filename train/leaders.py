@@ -32,7 +32,6 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 import os
 import re
 import shlex
@@ -427,16 +426,10 @@ class RewardCurriculum(_LinearSchedule):
     def __init__(self, engine: Any, start: dict[str, float], fraction: float, total: int, begin: float = 0.0) -> None:
         super().__init__(engine, start, fraction, total, begin)
         self.engine = engine
-        for key, val in start.items():
-            if engine.reward_weights.get(key, 0.0) == 0.0:
-                raise ValueError(
-                    f"reward curriculum: {key!r} has weight 0 in the run's reward_weights (or is not a term), so the "
-                    "compiled step does not compute it; give it its final weight there"
-                )
-            if isinstance(val, bool) or not isinstance(val, (int, float)) or not math.isfinite(val):
-                raise ValueError(f"reward curriculum: start[{key!r}] must be a finite number, got {val!r}")
-        self.final = {k: float(engine.reward_weights[k]) for k in start}
-        self.start = {k: float(v) for k, v in start.items()}
+        final = {k: engine.reward_weights.get(k, 0.0) for k in start}
+        engine.set_reward_weights(start)  # the engine's checks; training's first step pays the start weights
+        self.final = final
+        self.start = {k: float(engine.reward_weights[k]) for k in start}
 
     def _set(self, left: float) -> None:
         self.engine.set_reward_weights({k: b + left * (self.start[k] - b) for k, b in self.final.items()})

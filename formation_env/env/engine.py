@@ -294,17 +294,18 @@ class Engine:
         self._compose()  # every component's parameters are checked now, not at the first step
 
     # ------------------------------------------------------------------ construction
-    def _weights(self, overrides: dict[str, float] | None) -> dict[str, float]:
-        """The reward weights: the terms' defaults, then the scenario's, then ``overrides``."""
+    def _weights(self, overrides: dict[str, float] | None, arg: str = "reward_weights") -> dict[str, float]:
+        """The reward weights: the terms' defaults, then the scenario's, then ``overrides`` (the argument ``arg``,
+        which errors name)."""
         weights = {name: t.weight for name, t in TERMS.items()}
-        for source, given in (("scenario", self.scenario.weights), ("reward_weights", overrides or {})):
+        for source, given in (("scenario", self.scenario.weights), (arg, overrides or {})):
             for key, val in given.items():
                 if key not in TERMS:
                     raise TypeError(f"{source} got unknown reward term {key!r}; terms are {list(TERMS)}")
                 if isinstance(val, bool) or not isinstance(val, (int, float, np.integer, np.floating)):
-                    raise TypeError(f"reward_weights[{key!r}] must be a number, got {type(val).__name__}")
+                    raise TypeError(f"{source}[{key!r}] must be a number, got {type(val).__name__}")
                 if not math.isfinite(val):
-                    raise FormationError(f"reward_weights[{key!r}] must be finite, got {val}")
+                    raise FormationError(f"{source}[{key!r}] must be finite, got {val}")
                 weights[key] = float(val)
         return weights
 
@@ -312,13 +313,13 @@ class Engine:
         """Change the weights of reward terms this engine composed (nonzero at construction), in place: the next
         step pays the new weights, with no recompilation (a curriculum on the reward, e.g. a collision penalty
         that grows during training). Terms with weight 0 at construction are not in the compiled step: giving one
-        a weight here is an error (construct the engine with it nonzero).
+        a weight here is an error (construct the engine with it nonzero). Every weight is checked before any changes.
 
         Args:
             weights: ``{term: weight}``, each a finite number (0 switches a composed term off).
         """
         weights = check_mapping(weights, "weights")
-        new = self._weights(weights)
+        new = self._weights(weights, "weights")
         off = [k for k in weights if new[k] != 0.0 and k not in self._terms]
         if off:
             raise FormationError(

@@ -689,3 +689,65 @@ def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
     assert routes(np.array([0.0]))[0] == pytest.approx(2 * np.hypot(3.5, 1.45 + 0.15) + 1.0)
     disc = np.array([[0.0, y, 1.0] for y in (-4.0, -2.0, 0.0, 2.0, 4.0)]).ravel()  # no lane in the world's height
     assert routes(np.array([0.5]), goal_ys=np.array([-1.0]))[0] == pytest.approx(np.hypot(8.0, 1.5))  # straight
+
+
+def _windows_by_hand(eng, s, tau_step=1e-3):
+    """``crossing_windows`` from the state: each disc's room on a 1 ms grid (MovingCircle's own capsules), the
+    team's extent along x and its mean x-velocity (numpy)."""
+    from formation_env.env.scenarios.moving_obstacles import WINDOW_HORIZON as H
+
+    t, p, mc = eng.time(s), s.params["moving_circles"], MovingCircle()
+    b_y = eng.affine.fit(s.pos)[1][:, 1]
+    half = 0.5 * (s.pos[:, :, 1].max(1) - s.pos[:, :, 1].min(1)) + eng.agent_radius
+    taus = np.arange(0.0, H + tau_step / 2, tau_step)
+    ys = np.stack([mc.capsules(p, t + tau, eng.bounds).a[:, :, 1] for tau in taus], -1)  # (B, M, T)
+    blocked = np.abs(ys - b_y[:, None, None]) - p[:, :, 4, None] - half[:, None, None] < 0
+    front = s.pos[:, :, 0].max(1) + eng.agent_radius
+    back = s.pos[:, :, 0].min(1) - eng.agent_radius
+    vx = s.vel[:, :, 0].mean(1)
+    x = mc.capsules(p, t, eng.bounds).a[:, :, 0]
+    out = np.full(p.shape[:2] + (4,), H)
+    for b in range(p.shape[0]):
+        for j in range(p.shape[1]):
+            inside = np.flatnonzero(blocked[b, j])
+            if inside.size:
+                out[b, j, 0] = taus[inside[0]]
+                free = np.flatnonzero(~blocked[b, j, inside[0] :])
+                out[b, j, 1] = taus[inside[0] + free[0]] if free.size else H
+            lo, hi = x[b, j] - p[b, j, 4], x[b, j] + p[b, j, 4]
+            if back[b] >= hi:
+                out[b, j, 2:] = 0.0
+            elif vx[b] <= 0.01:
+                out[b, j, 2:] = (0.0 if front[b] >= lo else H), H
+            else:
+                out[b, j, 2:] = np.minimum([max(0.0, (lo - front[b]) / vx[b]), (hi - back[b]) / vx[b]], H)
+    return out.reshape(p.shape[0], -1)
+
+
+def test_moving_obstacles_crossing_windows_time_the_discs_and_the_team():
+    """The ``crossing_windows`` block: when each disc next enters and leaves the team's band (to a few ms of a 1 ms
+    scan of its bouncing path) and when the team, at its mean x-velocity, reaches and leaves the disc's strip,
+    for every leader, along episodes that move the team, bounce the discs and pass lanes; other scenarios are
+    refused by name."""
+    from agents.planner import make_planner
+
+    eng = Engine("moving_obstacles", observation=["position", "crossing_windows"])
+    sl = eng.observer.slices["crossing_windows"]
+    assert sl.stop - sl.start == 4 * 3
+    s = eng.reset(np.random.default_rng(5), 8)
+    planner = make_planner("moving_obstacles")
+    seen = np.zeros(4, bool)  # a window found, a window closing within H, the team approaching, a lane passed
+    for k in range(160):
+        obs = eng.observe(s)[..., sl]
+        want = _windows_by_hand(eng, s)
+        for i in range(eng.n_l):
+            np.testing.assert_allclose(obs[:, i], want, atol=5e-3, err_msg=f"step {k}, leader {i}")
+        w = want.reshape(8, 3, 4)
+        seen |= [(w[..., 0] < 6).any(), (w[..., 1] < 6).any(), ((w[..., 2] > 0) & (w[..., 2] < 6)).any(),
+                 (w[..., 3] == 0).any()]  # fmt: skip
+        s, *_ = eng.step(s, planner(eng, s))
+    assert seen.all()
+    with pytest.raises(
+        ValueError, match="'crossing_windows' reads moving_obstacles' lanes of discs; the scenario is 'obstacle_field'"
+    ):
+        Engine("obstacle_field", observation=["position", "crossing_windows"])

@@ -43,16 +43,21 @@ from formation_env.core.errors import FormationError
 
 from .._numba import jit
 from ..kernel import team_half_height
+from ..observations import observation_block
 from ..obstacles import MovingCircle, bounce_axis
 from ._base import Array, Draw, Scenario, check_range, rotation_2d
 
-__all__ = ["FORECAST", "MovingObstacles"]
+__all__ = ["FORECAST", "WINDOW_HORIZON", "MovingObstacles", "crossing_windows"]
 
 #: Look-ahead times (s) of the ``task`` block's room entries (0: now).
 FORECAST = (0.0, 1.0, 2.0, 3.0)
 _FORECAST = np.array(FORECAST)
 #: Entries per disc in the ``task`` block: lane x, centre y, velocity y, then the room at each look-ahead.
 _PER_DISC = 3 + len(FORECAST)
+#: Horizon H (s) of the ``crossing_windows`` block: a time it does not find within H reads H.
+WINDOW_HORIZON = 6.0
+#: Grid step (s) on which ``crossing_windows`` scans a disc's path (the crossing itself is interpolated on it).
+_WINDOW_STEP = 0.1
 
 
 @jit
@@ -75,6 +80,75 @@ def task_row(  # pragma: no cover
             room = abs(bounce_axis(c0y, vy, r, bounds[0, 1], bounds[1, 1], now[b] + _FORECAST[q])[0] - bfit[b, 1])
             for i in range(leaders.shape[0]):
                 out[i, k + 3 + q] = room - r - half
+
+
+def _window_count(engine: Any) -> int:
+    sc = engine.scenario
+    if not isinstance(sc, MovingObstacles):
+        raise ValueError(f"observation block 'crossing_windows' reads moving_obstacles' lanes of discs; the scenario "
+                         f"is {sc.name!r}")  # fmt: skip
+    return 4 * sc.n_moving
+
+
+@observation_block(
+    "crossing_windows", _window_count,
+    lambda e: (np.zeros(_window_count(e)), np.full(_window_count(e), WINDOW_HORIZON)),
+    "``moving_obstacles``, per disc in lane order (s, within H = 6 s; H: not within H): when it next enters and "
+    "then leaves the band of y the team sweeps now (its fitted b_y +- its half-height with the agents' discs), "
+    "and when the team, at its mean x-velocity now, reaches and leaves the disc's strip of x (0 once passed)",
+    size_text="4 M", bounds_text="[0, H]",
+)  # fmt: skip
+def crossing_windows(  # pragma: no cover
+    b: int, out: Array, lo: int, leaders: NDArray[np.int64], pos: Array, vel: Array, bfit: Array, radius: float,
+    now: Array, mov_p0: Array, bounds: Array,
+) -> None:  # fmt: skip
+    """Per disc j: entries 4 j .. 4 j + 3 of every leader's row (they are the team's, the same for each leader).
+
+    The disc blocks the band while its room, |y_c(t) - b_y| - r - half, is negative; the room is piecewise linear
+    in t (a triangle wave), so the times are the grid's sign changes on a 0.1 s grid, interpolated. The team
+    occupies x in [min x - radius, max x + radius]; at its mean x-velocity v_x > 0 it reaches the strip
+    [x_j - r, x_j + r] after (x_j - r - front) / v_x and leaves it after (x_j + r - back) / v_x (0 if already
+    reached or left; H if v_x <= 0.01 m/s and not yet in it)."""
+    H = WINDOW_HORIZON
+    dt = _WINDOW_STEP
+    steps = round(H / dt)
+    half = team_half_height(pos[b], radius)
+    by = bfit[b, 1]
+    front, back, vx = -np.inf, np.inf, 0.0
+    n = pos.shape[1]
+    for a in range(n):
+        front = max(front, pos[b, a, 0] + radius)
+        back = min(back, pos[b, a, 0] - radius)
+        vx += vel[b, a, 0] / n
+    for j in range(mov_p0.shape[1]):
+        c0x, c0y, vdx, vdy, r = mov_p0[b, j]
+        x = bounce_axis(c0x, vdx, r, bounds[0, 0], bounds[1, 0], now[b])[0]
+        t_in, t_out = H, H
+        prev = abs(bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], now[b])[0] - by) - r - half
+        if prev < 0.0:
+            t_in = 0.0
+        for q in range(1, steps + 1):
+            room = abs(bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], now[b] + q * dt)[0] - by) - r - half
+            crossed = (room < 0.0) != (prev < 0.0)
+            if crossed:
+                t = (q - 1) * dt + dt * prev / (prev - room)
+                if t_in == H and room < 0.0:
+                    t_in = t
+                elif t_in < H and room >= 0.0:
+                    t_out = t
+                    break
+            prev = room
+        if back >= x + r:  # passed
+            reach, leave = 0.0, 0.0
+        elif vx <= 0.01:
+            reach, leave = (0.0 if front >= x - r else H), H
+        else:
+            reach, leave = max(0.0, (x - r - front) / vx), (x + r - back) / vx
+        for i in range(leaders.shape[0]):
+            out[i, lo + 4 * j] = t_in
+            out[i, lo + 4 * j + 1] = t_out
+            out[i, lo + 4 * j + 2] = min(reach, H)
+            out[i, lo + 4 * j + 3] = min(leave, H)
 
 
 class MovingObstacles(Scenario):

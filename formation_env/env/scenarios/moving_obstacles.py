@@ -85,8 +85,8 @@ def task_row(  # pragma: no cover
 def _window_count(engine: Any) -> int:
     sc = engine.scenario
     if not isinstance(sc, MovingObstacles):
-        raise ValueError(f"observation block 'crossing_windows' reads moving_obstacles' lanes of discs; the scenario "
-                         f"is {sc.name!r}")  # fmt: skip
+        raise FormationError(f"observation block 'crossing_windows' reads moving_obstacles' lanes of discs; the "
+                             f"scenario is {sc.name!r}")  # fmt: skip
     return 4 * sc.n_moving
 
 

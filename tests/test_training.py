@@ -356,6 +356,25 @@ def test_hold_rotations_times_each_collision_and_its_rotation() -> None:
     assert angle.shape == (4,) and np.all((angle >= 0) & (angle <= 180)) and np.ptp(angle) > 1
 
 
+def test_failures_lists_each_collision_with_the_teams_place_and_shape(capsys: pytest.CaptureFixture[str]) -> None:
+    from agents.rollout import ENDINGS
+    from train.failures import failures, main
+
+    seeds = [0, 1, 2, 3]
+    rows = failures("random", seeds, "moving_obstacles")  # random leaders collide in every episode
+    assert [r["seed"] for r in rows] == seeds
+    eng = Engine("moving_obstacles")
+    for r in rows:
+        assert r["ending"] in ENDINGS and r["ending"] != "success" and 0 < r["time"] <= eng.max_cycles * eng.dt
+        assert len(r["scales"]) == 2 and r["scales"][0] >= r["scales"][1] > 0 and -8 < r["x"] < 8
+    assert failures("analytic", [0, 1], "hold") == []  # the planner solves these
+    main(["--policy", "random", "--scenario", "hold", "--episodes", "2"])
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == "collisions: 2 of 2" and len(out) == 4
+    with pytest.raises(SystemExit):
+        main(["--policy", "random", "--episodes", "0"])
+
+
 def test_approach_profile_follows_the_team_to_its_goal(capsys: pytest.CaptureFixture[str]) -> None:
     from train.approach_profile import main, profile
 

@@ -36,7 +36,7 @@ def failures(policy: str, seeds: Sequence[int], scenario: str | None = None) -> 
 
     res = run_batch(engine, act, seeds)
     rows = []
-    for i in np.flatnonzero(res["collision"]):
+    for i in np.flatnonzero(res["collision"]).tolist():
         x, vx, sv = (a[i] for a in last[int(res["steps"][i]) - 1])
         rows.append({"seed": int(seeds[i]), "ending": str(res["ending"][i]), "time": float(res["steps"][i]) * engine.dt,
                      "x": float(x), "vx": float(vx), "scales": sv.tolist()})  # fmt: skip

@@ -748,6 +748,6 @@ def test_moving_obstacles_crossing_windows_time_the_discs_and_the_team():
         s, *_ = eng.step(s, planner(eng, s))
     assert seen.all()
     with pytest.raises(
-        ValueError, match="'crossing_windows' reads moving_obstacles' lanes of discs; the scenario is 'obstacle_field'"
+        FormationError, match="'crossing_windows' reads moving_obstacles' lanes of discs; the scenario is 'obstacle_fi"
     ):
         Engine("obstacle_field", observation=["position", "crossing_windows"])

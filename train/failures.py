@@ -30,8 +30,8 @@ def failures(policy: str, seeds: Sequence[int], scenario: str | None = None) -> 
     last: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
 
     def act(eng: Engine, state: EngineState, obs: Any) -> np.ndarray:
-        theta = eng.affine.fit(state.pos)[0]
-        last.append((state.pos[:, :, 0].mean(axis=1), state.vel[:, :, 0].mean(axis=1), np.linalg.svd(theta)[1]))
+        scales = np.linalg.svd(eng.affine.fit(state.pos)[0], compute_uv=False)
+        last.append((state.pos[:, :, 0].mean(axis=1), state.vel[:, :, 0].mean(axis=1), scales))
         return pol.act_engine(eng, state, obs)
 
     res = run_batch(engine, act, seeds)

@@ -751,3 +751,56 @@ def test_moving_obstacles_crossing_windows_time_the_discs_and_the_team():
         FormationError, match="'crossing_windows' reads moving_obstacles' lanes of discs; the scenario is 'obstacle_fi"
     ):
         Engine("obstacle_field", observation=["position", "crossing_windows"])
+
+
+def _approach_by_hand(eng, s, tau_step=1e-3):
+    """``closest_approach`` from the state: each agent against each disc on a 1 ms grid of the horizon (MovingCircle's
+    own capsules), moving on at its velocity now and at rest (numpy); gaps (B, M, 2) and the team's gap at every
+    grid time (B, M, 2, T) to read the block's times against."""
+    from formation_env.env.scenarios.moving_obstacles import WINDOW_HORIZON as H
+
+    t, p, mc = eng.time(s), s.params["moving_circles"], MovingCircle()
+    taus = np.arange(0.0, H + tau_step / 2, tau_step)
+    c = np.stack([mc.capsules(p, t + tau, eng.bounds).a for tau in taus], 2)  # (B, M, T, 2)
+    curves = []
+    for v in (s.vel, np.zeros_like(s.vel)):
+        agents = s.pos[:, :, None] + v[:, :, None] * taus[None, None, :, None]  # (B, n, T, 2)
+        dist = np.linalg.norm(agents[:, None] - c[:, :, None], axis=-1).min(2)  # (B, M, T)
+        curves.append(dist - p[:, :, 4, None] - eng.agent_radius)
+    curves = np.stack(curves, 2)
+    return curves.min(-1), curves
+
+
+def test_moving_obstacles_closest_approach_is_the_least_gap_to_each_disc():
+    """The ``closest_approach`` block: per disc, the least gap between it and any agent moving on at its velocity
+    now, and with the agents at rest, to a few mm of a 1 ms scan, with the gap at the reported time equal to that
+    least gap; capped at 4 m; along planner-driven episodes that cross the lanes; other scenarios refused by name."""
+    from agents.planner import make_planner
+    from formation_env.env.scenarios.moving_obstacles import GAP_CAP, WINDOW_HORIZON
+
+    eng = Engine("moving_obstacles", observation=["position", "closest_approach"])
+    sl = eng.observer.slices["closest_approach"]
+    assert sl.stop - sl.start == 4 * 3
+    s = eng.reset(np.random.default_rng(7), 6)
+    planner = make_planner("moving_obstacles")
+    seen = np.zeros(3, bool)  # a near pass (< 0.3 m) at speed, one at rest, moving and resting gaps that differ
+    for k in range(120):
+        if k % 4 == 0:
+            obs = eng.observe(s)[..., sl].reshape(6, eng.n_l, 3, 2, 2)
+            gaps, curves = _approach_by_hand(eng, s)
+            capped = gaps >= GAP_CAP
+            for i in range(eng.n_l):
+                np.testing.assert_allclose(obs[:, i, ..., 0], np.minimum(gaps, GAP_CAP), atol=5e-3,
+                                           err_msg=f"step {k}, leader {i}")  # fmt: skip
+            when = obs[:, 0, ..., 1]
+            assert np.all(when[capped] == WINDOW_HORIZON)
+            at = np.take_along_axis(curves, np.rint(when / 1e-3).astype(int)[..., None], -1)[..., 0]
+            np.testing.assert_allclose(at[~capped], gaps[~capped], atol=5e-3, err_msg=f"step {k}: times")
+            seen |= [(gaps[:, :, 0] < 0.3).any(), (gaps[:, :, 1] < 0.3).any(),
+                     (np.abs(gaps[:, :, 0] - gaps[:, :, 1]) > 0.5).any()]  # fmt: skip
+        s, *_ = eng.step(s, planner(eng, s))
+    assert seen.all()
+    with pytest.raises(
+        FormationError, match="'closest_approach' reads moving_obstacles' lanes of discs; the scenario is 'hold'"
+    ):
+        Engine("hold", observation=["position", "closest_approach"])

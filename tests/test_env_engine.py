@@ -790,12 +790,12 @@ def test_moving_obstacles_closest_approach_is_the_least_gap_to_each_disc():
             gaps, curves = _approach_by_hand(eng, s)
             capped = gaps >= GAP_CAP
             for i in range(eng.n_l):
-                np.testing.assert_allclose(obs[:, i, ..., 0], np.minimum(gaps, GAP_CAP), atol=1e-3,
+                np.testing.assert_allclose(obs[:, i, ..., 0], np.minimum(gaps, GAP_CAP), atol=5e-3,
                                            err_msg=f"step {k}, leader {i}")  # fmt: skip
             when = obs[:, 0, ..., 1]
             assert np.all(when[capped] == WINDOW_HORIZON)
             at = np.take_along_axis(curves, np.rint(when / 1e-3).astype(int)[..., None], -1)[..., 0]
-            np.testing.assert_allclose(at[~capped], gaps[~capped], atol=1e-3, err_msg=f"step {k}: times")
+            np.testing.assert_allclose(at[~capped], gaps[~capped], atol=5e-3, err_msg=f"step {k}: times")
             seen |= [(gaps[:, :, 0] < 0.3).any(), (gaps[:, :, 1] < 0.3).any(),
                      (np.abs(gaps[:, :, 0] - gaps[:, :, 1]) > 0.5).any()]  # fmt: skip
         s, *_ = eng.step(s, planner(eng, s))

@@ -158,18 +158,6 @@ def crossing_windows(  # pragma: no cover
             out[i, lo + 4 * j + 3] = min(leave, H)
 
 
-@jit
-def next_turn(c0: float, v: float, r: float, lo: float, hi: float, t: float) -> float:  # pragma: no cover
-    """The first time (s) after t at which :func:`bounce_axis`'s disc turns at a face (inf if v = 0): its phase
-    u = c0 - lo - r + v t turns at every multiple of the span hi - lo - 2 r."""
-    if v == 0.0:
-        return np.inf
-    span = max(hi - lo - 2.0 * r, 1e-12)
-    u = c0 - lo - r + v * t
-    k = np.floor(u / span) + 1.0 if v > 0.0 else np.ceil(u / span) - 1.0
-    return max((k * span - (c0 - lo - r)) / v, t)
-
-
 def _approach_count(engine: Any) -> int:
     return _disc_blocks("closest_approach", engine)
 
@@ -193,39 +181,36 @@ def closest_approach(  # pragma: no cover
 ) -> None:  # fmt: skip
     """Per disc j: entries 4 j .. 4 j + 3 of every leader's row (the team's, the same for each leader).
 
-    The gap of agent a to disc j at time tau is |p_a + u_a tau - c_j(now + tau)| - r_j - radius (u_a its velocity
-    now, or 0 at rest). Between two of the disc's turns at the world's faces its centre moves on a straight line,
-    so the relative position does too and its least distance on that piece is the closest point of a segment to
-    the origin: exact, piece by piece over the horizon."""
+    The gap of agent a to disc j at time tau is |p_a + v_a tau - c_j(now + tau)| - r_j - radius (v_a its velocity
+    now, or 0 at rest). On each 0.1 s step of the horizon the relative position moves on a straight line (exactly
+    so where the disc does not bounce within the step), so its least distance on the step is the segment's
+    closest point to the origin: exact, not sampled, but for the few centimetres a bounce inside a step moves."""
     H = WINDOW_HORIZON
+    dt = _WINDOW_STEP
+    steps = round(H / dt)
     n = pos.shape[1]
-    lo_x, hi_x, lo_y, hi_y = bounds[0, 0], bounds[1, 0], bounds[0, 1], bounds[1, 1]
     for j in range(mov_p0.shape[1]):
         c0x, c0y, vdx, vdy, r = mov_p0[b, j]
-        best0, best1, when0, when1 = np.inf, np.inf, H, H
-        ta = 0.0
-        while ta < H:
-            tb = min(H, next_turn(c0x, vdx, r, lo_x, hi_x, now[b] + ta) - now[b],
-                     next_turn(c0y, vdy, r, lo_y, hi_y, now[b] + ta) - now[b])  # fmt: skip
-            tm = 0.5 * (ta + tb)
-            cx, wx = bounce_axis(c0x, vdx, r, lo_x, hi_x, now[b] + tm)
-            cy, wy = bounce_axis(c0y, vdy, r, lo_y, hi_y, now[b] + tm)
-            for a in range(n):
-                ax, ay = pos[b, a, 0] - cx + wx * tm, pos[b, a, 1] - cy + wy * tm  # relative position A + D tau
-                for mode in range(2):  # 0: at its velocity now, D = u_a - w; 1: at rest, D = -w
-                    dx = (vel[b, a, 0] if mode == 0 else 0.0) - wx
-                    dy = (vel[b, a, 1] if mode == 0 else 0.0) - wy
+        for mode in range(2):  # 0: at their velocities now; 1: at rest
+            best, when = np.inf, H
+            px = bounce_axis(c0x, vdx, r, bounds[0, 0], bounds[1, 0], now[b])[0]
+            py = bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], now[b])[0]
+            for q in range(1, steps + 1):
+                t0, t1 = (q - 1) * dt, q * dt
+                cx = bounce_axis(c0x, vdx, r, bounds[0, 0], bounds[1, 0], now[b] + t1)[0]
+                cy = bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], now[b] + t1)[0]
+                for a in range(n):
+                    ux = vel[b, a, 0] if mode == 0 else 0.0
+                    uy = vel[b, a, 1] if mode == 0 else 0.0
+                    x0, y0 = pos[b, a, 0] + ux * t0 - px, pos[b, a, 1] + uy * t0 - py
+                    dx, dy = pos[b, a, 0] + ux * t1 - cx - x0, pos[b, a, 1] + uy * t1 - cy - y0
                     dd = dx * dx + dy * dy
-                    s = ta if dd <= 0.0 else min(max(-(ax * dx + ay * dy) / dd, ta), tb)
-                    dist = np.hypot(ax + s * dx, ay + s * dy)
-                    if mode == 0 and dist < best0:
-                        best0, when0 = dist, s
-                    elif mode == 1 and dist < best1:
-                        best1, when1 = dist, s
-            ta = max(tb, ta + 1e-9)
-        for mode in range(2):
-            gap, when = (best0, when0) if mode == 0 else (best1, when1)
-            gap -= r + radius
+                    s = 0.0 if dd <= 0.0 else min(max(-(x0 * dx + y0 * dy) / dd, 0.0), 1.0)
+                    dist = np.hypot(x0 + s * dx, y0 + s * dy)
+                    if dist < best:
+                        best, when = dist, t0 + s * dt
+                px, py = cx, cy
+            gap = best - r - radius
             if gap >= GAP_CAP:
                 gap, when = GAP_CAP, H
             for i in range(leaders.shape[0]):

@@ -47,7 +47,7 @@ from ..observations import observation_block
 from ..obstacles import MovingCircle, bounce_axis
 from ._base import Array, Draw, Scenario, check_range, rotation_2d
 
-__all__ = ["FORECAST", "GAP_CAP", "WINDOW_HORIZON", "MovingObstacles", "closest_approach", "crossing_windows"]
+__all__ = ["FORECAST", "WINDOW_HORIZON", "MovingObstacles", "crossing_windows"]
 
 #: Look-ahead times (s) of the ``task`` block's room entries (0: now).
 FORECAST = (0.0, 1.0, 2.0, 3.0)
@@ -58,8 +58,6 @@ _PER_DISC = 3 + len(FORECAST)
 WINDOW_HORIZON = 6.0
 #: Grid step (s) on which ``crossing_windows`` scans a disc's path (the crossing itself is interpolated on it).
 _WINDOW_STEP = 0.1
-#: Largest gap (m) the ``closest_approach`` block reports: a disc that stays farther from the team reads it.
-GAP_CAP = 4.0
 
 
 @jit
@@ -84,17 +82,12 @@ def task_row(  # pragma: no cover
                 out[i, k + 3 + q] = room - r - half
 
 
-def _disc_blocks(block: str, engine: Any) -> int:
-    """4 entries per disc of ``moving_obstacles``; a FormationError naming ``block`` for another scenario."""
+def _window_count(engine: Any) -> int:
     sc = engine.scenario
     if not isinstance(sc, MovingObstacles):
-        raise FormationError(f"observation block {block!r} reads moving_obstacles' lanes of discs; the "
+        raise FormationError(f"observation block 'crossing_windows' reads moving_obstacles' lanes of discs; the "
                              f"scenario is {sc.name!r}")  # fmt: skip
     return 4 * sc.n_moving
-
-
-def _window_count(engine: Any) -> int:
-    return _disc_blocks("crossing_windows", engine)
 
 
 @observation_block(
@@ -156,66 +149,6 @@ def crossing_windows(  # pragma: no cover
             out[i, lo + 4 * j + 1] = t_out
             out[i, lo + 4 * j + 2] = min(reach, H)
             out[i, lo + 4 * j + 3] = min(leave, H)
-
-
-def _approach_count(engine: Any) -> int:
-    return _disc_blocks("closest_approach", engine)
-
-
-def _approach_bounds(engine: Any) -> tuple[Array, Array]:
-    m = _approach_count(engine) // 4
-    gap_lo = -(engine.scenario.moving_radius[1] + engine.agent_radius)
-    return np.tile([gap_lo, 0.0, gap_lo, 0.0], m), np.tile([GAP_CAP, WINDOW_HORIZON, GAP_CAP, WINDOW_HORIZON], m)
-
-
-@observation_block(
-    "closest_approach", _approach_count, _approach_bounds,
-    "``moving_obstacles``, per disc in lane order: the least gap (m, surface to surface; negative: contact) between "
-    "the disc on its bouncing path and any agent moving on at its velocity now, and when (s), within H = 6 s; then "
-    "the same with every agent at rest where it is (gaps capped at 4 m, their time then H)",
-    size_text="4 M", bounds_text="[-(r_max + radius), 4] m, [0, H] s",
-)  # fmt: skip
-def closest_approach(  # pragma: no cover
-    b: int, out: Array, lo: int, leaders: NDArray[np.int64], pos: Array, vel: Array, radius: float, now: Array,
-    mov_p0: Array, bounds: Array,
-) -> None:  # fmt: skip
-    """Per disc j: entries 4 j .. 4 j + 3 of every leader's row (the team's, the same for each leader).
-
-    The gap of agent a to disc j at time tau is |p_a + v_a tau - c_j(now + tau)| - r_j - radius (v_a its velocity
-    now, or 0 at rest). On each 0.1 s step of the horizon the relative position moves on a straight line (exactly
-    so where the disc does not bounce within the step), so its least distance on the step is the segment's
-    closest point to the origin: exact, not sampled, but for the few centimetres a bounce inside a step moves."""
-    H = WINDOW_HORIZON
-    dt = _WINDOW_STEP
-    steps = round(H / dt)
-    n = pos.shape[1]
-    for j in range(mov_p0.shape[1]):
-        c0x, c0y, vdx, vdy, r = mov_p0[b, j]
-        for mode in range(2):  # 0: at their velocities now; 1: at rest
-            best, when = np.inf, H
-            px = bounce_axis(c0x, vdx, r, bounds[0, 0], bounds[1, 0], now[b])[0]
-            py = bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], now[b])[0]
-            for q in range(1, steps + 1):
-                t0, t1 = (q - 1) * dt, q * dt
-                cx = bounce_axis(c0x, vdx, r, bounds[0, 0], bounds[1, 0], now[b] + t1)[0]
-                cy = bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], now[b] + t1)[0]
-                for a in range(n):
-                    ux = vel[b, a, 0] if mode == 0 else 0.0
-                    uy = vel[b, a, 1] if mode == 0 else 0.0
-                    x0, y0 = pos[b, a, 0] + ux * t0 - px, pos[b, a, 1] + uy * t0 - py
-                    dx, dy = pos[b, a, 0] + ux * t1 - cx - x0, pos[b, a, 1] + uy * t1 - cy - y0
-                    dd = dx * dx + dy * dy
-                    s = 0.0 if dd <= 0.0 else min(max(-(x0 * dx + y0 * dy) / dd, 0.0), 1.0)
-                    dist = np.hypot(x0 + s * dx, y0 + s * dy)
-                    if dist < best:
-                        best, when = dist, t0 + s * dt
-                px, py = cx, cy
-            gap = best - r - radius
-            if gap >= GAP_CAP:
-                gap, when = GAP_CAP, H
-            for i in range(leaders.shape[0]):
-                out[i, lo + 4 * j + 2 * mode] = gap
-                out[i, lo + 4 * j + 2 * mode + 1] = when
 
 
 class MovingObstacles(Scenario):

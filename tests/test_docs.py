@@ -3,6 +3,7 @@ registers a block, a term and a scenario, which must not leak into the other tes
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -44,8 +45,6 @@ def test_networks_page_code_runs():
 def test_readme_policy_table_wall_times_are_the_configs():
     """Every wall time in the README's table of shipped policies is its ``_config.json``'s ``wall_time_s`` (min, to
     0.1), row by row: a policy retrained without its row rewritten fails here."""
-    import json
-
     table = (ROOT / "README.md").read_text().split("| policy | command | wall time |")[1].split("\n\n")[0]
     checked = 0
     for row in table.strip().splitlines()[1:]:

@@ -367,12 +367,36 @@ def test_failures_lists_each_collision_with_the_teams_place_and_shape(capsys: py
     for r in rows:
         assert r["ending"] in ENDINGS and r["ending"] != "success" and 0 < r["time"] <= eng.max_cycles * eng.dt
         assert len(r["scales"]) == 2 and r["scales"][0] >= r["scales"][1] > 0 and -8 < r["x"] < 8
+        assert len(r["scales_before"]) == 2 and r["scales_before"][0] >= r["scales_before"][1] > 0
+        if r["ending"] == "obstacle":
+            assert r["leader"] == (r["agent"] in eng.leaders) and r["r"] == eng.fw.positions[r["agent"]].tolist()
+        else:
+            assert r["agent"] is None and r["leader"] is None and r["r"] is None
+    assert any(r["ending"] == "obstacle" for r in rows)
     assert failures("analytic", [0, 1], "hold") == []  # the planner solves these
     main(["--policy", "random", "--scenario", "hold", "--episodes", "2"])
     out = capsys.readouterr().out.splitlines()
     assert out[0] == "collisions: 2 of 2" and len(out) == 4
     with pytest.raises(SystemExit):
         main(["--policy", "random", "--episodes", "0"])
+
+
+def test_failures_names_the_agent_nearest_an_obstacle() -> None:
+    from agents.rollout import reset_paired
+    from train.failures import nearest_agent
+
+    eng = Engine("moving_obstacles")
+    state = reset_paired(eng, [0, 1])
+    discs = state.params["moving_circles"]  # (B, M, 5): centre, velocity, radius at k = 0
+    for who in (0, 3):  # a leader, then a follower, 5 cm off disc 1's rim; the others 1 m further along its lane
+        pos = state.pos.copy()
+        for b in range(2):
+            c, r = discs[b, 1, :2], discs[b, 1, 4]
+            toward_middle = np.array([0.0, -1.0 if c[1] > 0 else 1.0])  # the other discs are >= 1.85 m away in x
+            for a in range(eng.n):
+                pos[b, a] = c + toward_middle * (r + (0.05 if a == who else 1.05 + 0.1 * a))
+        moved = state._replace(pos=pos)
+        assert nearest_agent(eng, moved, 0) == who and nearest_agent(eng, moved, 1) == who
 
 
 def test_approach_profile_follows_the_team_to_its_goal(capsys: pytest.CaptureFixture[str]) -> None:

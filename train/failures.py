@@ -2,9 +2,11 @@
 
 Runs the suite (seeds ``--seed`` .. ``--seed + --episodes - 1``, as ``evaluate``) and prints, for every episode that
 ends in a collision, its seed, its ending (``agents.rollout.ENDINGS``: ``obstacle``, ``agents``, ``world_box``), the
-time of the contact (s), the team's centroid x (m) and mean x-velocity (m/s) at the last sample before it, and the
-singular values of the fitted Theta there (the formation's largest and smallest scale: 1 is the nominal shape's, a small
-one a flattened team). ``--policy`` takes what ``evaluate`` takes. docs/learning.md reads it.
+time of the contact (s), the team's centroid x (m) and mean x-velocity (m/s) at the last sample before it, the
+singular values of the fitted Theta there and a second earlier (the formation's largest and smallest scale: 1 is the
+nominal shape's, a small one a flattened team; a growing one a team restoring its shape), and, for an ``obstacle``
+ending, the agent nearest an obstacle's surface at that sample (its index, L for a leader or F for a follower, and its
+nominal position r_i). ``--policy`` takes what ``evaluate`` takes. docs/learning.md reads it.
 """
 
 from __future__ import annotations
@@ -19,27 +21,46 @@ import numpy as np
 from agents.policy import load_policy
 from agents.rollout import run_batch
 from formation_env.env.engine import Engine, EngineState
+from formation_env.env.obstacles import point_clearance
+
+
+def nearest_agent(engine: Engine, state: EngineState, i: int) -> int:
+    """Index of the agent of copy ``i`` whose disc is nearest an obstacle's surface in ``state``."""
+    caps = engine.capsules(state.params, state.k)
+    gaps = [point_clearance(state.pos[i, a : a + 1], caps.a[i], caps.e[i], caps.rad[i]) for a in range(engine.n)]
+    return int(np.argmin(gaps))
 
 
 def failures(policy: str, seeds: Sequence[int], scenario: str | None = None) -> list[dict[str, Any]]:
     """One row per suite episode that ends in a collision: ``seed``, ``ending``, ``time`` (s), ``x`` (m, the
     centroid's), ``vx`` (m/s, the agents' mean), ``scales`` (the fitted Theta's singular values, largest first), all
-    read at the last sample before the contact."""
+    read at the last sample before the contact; ``scales_before`` the same one second (or the episode's start)
+    earlier; for an ``obstacle`` ending ``agent`` (the index of the agent nearest an obstacle's surface at that
+    sample), ``leader`` (bool) and ``r`` (its nominal position r_i, m), else None for the three."""
     pol = load_policy(policy, scenario=scenario)
     engine = pol.engine
-    last: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+    last: list[tuple[np.ndarray, np.ndarray, np.ndarray, EngineState]] = []
 
     def act(eng: Engine, state: EngineState, obs: Any) -> np.ndarray:
         scales = np.linalg.svd(eng.affine.fit(state.pos)[0], compute_uv=False)
-        last.append((state.pos[:, :, 0].mean(axis=1), state.vel[:, :, 0].mean(axis=1), scales))
+        last.append((state.pos[:, :, 0].mean(axis=1), state.vel[:, :, 0].mean(axis=1), scales, state))
         return pol.act_engine(eng, state, obs)
 
     res = run_batch(engine, act, seeds)
+    lag = round(1.0 / engine.dt)
+    leaders = set(np.asarray(engine.leaders).tolist())
     rows = []
     for i in np.flatnonzero(res["collision"]).tolist():
-        x, vx, sv = (a[i] for a in last[int(res["steps"][i]) - 1])
-        rows.append({"seed": int(seeds[i]), "ending": str(res["ending"][i]), "time": float(res["steps"][i]) * engine.dt,
-                     "x": float(x), "vx": float(vx), "scales": sv.tolist()})  # fmt: skip
+        k = int(res["steps"][i]) - 1
+        xs, vxs, svs, state = last[k]
+        x, vx, sv = xs[i], vxs[i], svs[i]
+        sv_before = last[max(k - lag, 0)][2][i]
+        ending = str(res["ending"][i])
+        agent = nearest_agent(engine, state, i) if ending == "obstacle" else None
+        rows.append({"seed": int(seeds[i]), "ending": ending, "time": float(res["steps"][i]) * engine.dt,
+                     "x": float(x), "vx": float(vx), "scales": sv.tolist(), "scales_before": sv_before.tolist(),
+                     "agent": agent, "leader": None if agent is None else agent in leaders,
+                     "r": None if agent is None else engine.fw.positions[agent].tolist()})  # fmt: skip
     return rows
 
 
@@ -54,10 +75,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.error(f"--episodes must be >= 1, got {a.episodes}")
     rows = failures(a.policy, list(range(a.seed, a.seed + a.episodes)), a.scenario)
     print(f"collisions: {len(rows)} of {a.episodes}")
-    print("seed | ending | t (s) | centroid x (m) | x-velocity (m/s) | Theta's singular values")
+    print("seed | ending | t (s) | centroid x (m) | x-velocity (m/s) | Theta's singular values | a second earlier | "
+          "agent at the obstacle (L/F, r_i)")  # fmt: skip
     for r in rows:
-        sv = " / ".join(f"{v:.2f}" for v in r["scales"])
-        print(f"{r['seed']} | {r['ending']} | {r['time']:.1f} | {r['x']:.2f} | {r['vx']:.2f} | {sv}")
+        sv, sv0 = (" / ".join(f"{v:.2f}" for v in r[key]) for key in ("scales", "scales_before"))
+        who = "-"
+        if r["agent"] is not None:
+            who = f"{r['agent']} {'L' if r['leader'] else 'F'} ({', '.join(f'{v:g}' for v in r['r'])})"
+        print(f"{r['seed']} | {r['ending']} | {r['time']:.1f} | {r['x']:.2f} | {r['vx']:.2f} | {sv} | {sv0} | {who}")
     return 0
 
 

@@ -368,10 +368,9 @@ def test_failures_lists_each_collision_with_the_teams_place_and_shape(capsys: py
         assert r["ending"] in ENDINGS and r["ending"] != "success" and 0 < r["time"] <= eng.max_cycles * eng.dt
         assert len(r["scales"]) == 2 and r["scales"][0] >= r["scales"][1] > 0 and -8 < r["x"] < 8
         assert len(r["scales_before"]) == 2 and r["scales_before"][0] >= r["scales_before"][1] > 0
-        if r["ending"] == "obstacle":
-            assert r["leader"] == (r["agent"] in eng.leaders) and r["r"] == eng.fw.positions[r["agent"]].tolist()
-        else:
-            assert r["agent"] is None and r["leader"] is None and r["r"] is None
+        assert len(r["agents"]) == {"obstacle": 1, "agents": 2}.get(r["ending"], 0)
+        assert r["leader"] == [a in eng.leaders for a in r["agents"]]
+        assert r["r"] == [eng.fw.positions[a].tolist() for a in r["agents"]]
     assert any(r["ending"] == "obstacle" for r in rows)
     assert failures("analytic", [0, 1], "hold") == []  # the planner solves these
     main(["--policy", "random", "--scenario", "hold", "--episodes", "2"])
@@ -379,11 +378,13 @@ def test_failures_lists_each_collision_with_the_teams_place_and_shape(capsys: py
     assert out[0] == "collisions: 2 of 2" and len(out) == 4
     with pytest.raises(SystemExit):
         main(["--policy", "random", "--episodes", "0"])
+    with pytest.raises(SystemExit):
+        main(["--policy", "random", "--env-kwargs", "[1]"])
 
 
-def test_failures_names_the_agent_nearest_an_obstacle() -> None:
+def test_failures_names_the_agents_in_contact() -> None:
     from agents.rollout import reset_paired
-    from train.failures import nearest_agent
+    from train.failures import failures, nearest_agent, nearest_pair
 
     eng = Engine("moving_obstacles")
     state = reset_paired(eng, [0, 1])
@@ -397,6 +398,13 @@ def test_failures_names_the_agent_nearest_an_obstacle() -> None:
                 pos[b, a] = c + toward_middle * (r + (0.05 if a == who else 1.05 + 0.1 * a))
         moved = state._replace(pos=pos)
         assert nearest_agent(eng, moved, 0) == who and nearest_agent(eng, moved, 1) == who
+    pos = np.stack([np.array([0.0, 3.0 * a]) for a in range(eng.n)])[None].repeat(2, 0)
+    pos[1, 4] = pos[1, 1] + [0.15, 0.0]  # copy 1: agents 1 and 4 0.15 m apart, the rest 3 m
+    assert nearest_pair(state._replace(pos=pos), 1) == (1, 4)
+    # the passage planner with linear followers on a perfect network: some episodes end in two agents touching
+    rows = failures("analytic", list(range(6)), "narrow_passage", {"follower_law": "linear"})
+    touching = [r for r in rows if r["ending"] == "agents"]
+    assert touching and all(len(r["agents"]) == 2 and r["agents"][0] < r["agents"][1] for r in touching)
 
 
 def test_approach_profile_follows_the_team_to_its_goal(capsys: pytest.CaptureFixture[str]) -> None:

@@ -4,14 +4,17 @@ Runs the suite (seeds ``--seed`` .. ``--seed + --episodes - 1``, as ``evaluate``
 ends in a collision, its seed, its ending (``agents.rollout.ENDINGS``: ``obstacle``, ``agents``, ``world_box``), the
 time of the contact (s), the team's centroid x (m) and mean x-velocity (m/s) at the last sample before it, the
 singular values of the fitted Theta there and a second earlier (the formation's largest and smallest scale: 1 is the
-nominal shape's, a small one a flattened team; a growing one a team restoring its shape), and, for an ``obstacle``
-ending, the agent nearest an obstacle's surface at that sample (its index, L for a leader or F for a follower, and its
-nominal position r_i). ``--policy`` takes what ``evaluate`` takes. docs/learning.md reads it.
+nominal shape's, a small one a flattened team; a growing one a team restoring its shape), and the agents in contact
+at that sample: for an ``obstacle`` ending the agent nearest an obstacle's surface, for an ``agents`` ending the nearest
+pair (index, L for a leader or F for a follower, nominal position r_i). ``--policy`` takes what ``evaluate`` takes,
+``--env-kwargs`` the engine's arguments (e.g. a follower law and a network). docs/learning.md and docs/networks.md read
+it.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 from collections.abc import Sequence
 from typing import Any
@@ -31,13 +34,24 @@ def nearest_agent(engine: Engine, state: EngineState, i: int) -> int:
     return int(np.argmin(gaps))
 
 
-def failures(policy: str, seeds: Sequence[int], scenario: str | None = None) -> list[dict[str, Any]]:
+def nearest_pair(state: EngineState, i: int) -> tuple[int, int]:
+    """The two agents of copy ``i`` nearest each other in ``state`` (lower index first)."""
+    p = state.pos[i]
+    dist = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag(np.full(p.shape[0], np.inf))
+    a, b = np.unravel_index(int(np.argmin(dist)), dist.shape)
+    return int(min(a, b)), int(max(a, b))
+
+
+def failures(
+    policy: str, seeds: Sequence[int], scenario: str | None = None, env_kwargs: dict[str, Any] | None = None
+) -> list[dict[str, Any]]:
     """One row per suite episode that ends in a collision: ``seed``, ``ending``, ``time`` (s), ``x`` (m, the
     centroid's), ``vx`` (m/s, the agents' mean), ``scales`` (the fitted Theta's singular values, largest first), all
     read at the last sample before the contact; ``scales_before`` the same one second (or the episode's start)
-    earlier; for an ``obstacle`` ending ``agent`` (the index of the agent nearest an obstacle's surface at that
-    sample), ``leader`` (bool) and ``r`` (its nominal position r_i, m), else None for the three."""
-    pol = load_policy(policy, scenario=scenario)
+    earlier; ``agents`` (indices: for an ``obstacle`` ending the agent nearest an obstacle's surface at that sample,
+    for an ``agents`` ending the nearest pair, else none), ``leader`` (a bool each) and ``r`` (their nominal positions
+    r_i, m). ``env_kwargs``: as :func:`train.evaluate.evaluate`'s."""
+    pol = load_policy(policy, scenario=scenario, env_kwargs=env_kwargs)
     engine = pol.engine
     last: list[tuple[np.ndarray, np.ndarray, np.ndarray, EngineState]] = []
 
@@ -56,11 +70,12 @@ def failures(policy: str, seeds: Sequence[int], scenario: str | None = None) -> 
         x, vx, sv = xs[i], vxs[i], svs[i]
         sv_before = last[max(k - lag, 0)][2][i]
         ending = str(res["ending"][i])
-        agent = nearest_agent(engine, state, i) if ending == "obstacle" else None
+        who = [nearest_agent(engine, state, i)] if ending == "obstacle" else []
+        who = list(nearest_pair(state, i)) if ending == "agents" else who
         rows.append({"seed": int(seeds[i]), "ending": ending, "time": float(res["steps"][i]) * engine.dt,
                      "x": float(x), "vx": float(vx), "scales": sv.tolist(), "scales_before": sv_before.tolist(),
-                     "agent": agent, "leader": None if agent is None else agent in leaders,
-                     "r": None if agent is None else engine.fw.positions[agent].tolist()})  # fmt: skip
+                     "agents": who, "leader": [a in leaders for a in who],
+                     "r": [engine.fw.positions[a].tolist() for a in who]})  # fmt: skip
     return rows
 
 
@@ -70,18 +85,24 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--scenario", default=None, help="default: the policy's")
     p.add_argument("--episodes", type=int, default=100)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--env-kwargs", default=None, help='JSON engine arguments, e.g. {"follower_law": "linear"}')
     a = p.parse_args(argv)
     if a.episodes < 1:
         p.error(f"--episodes must be >= 1, got {a.episodes}")
-    rows = failures(a.policy, list(range(a.seed, a.seed + a.episodes)), a.scenario)
+    try:
+        env_kwargs = None if a.env_kwargs is None else json.loads(a.env_kwargs)
+    except json.JSONDecodeError as e:
+        p.error(f"--env-kwargs is not JSON: {e}")
+    if env_kwargs is not None and not isinstance(env_kwargs, dict):
+        p.error(f"--env-kwargs must be a JSON object, got {a.env_kwargs!r}")
+    rows = failures(a.policy, list(range(a.seed, a.seed + a.episodes)), a.scenario, env_kwargs)
     print(f"collisions: {len(rows)} of {a.episodes}")
     print("seed | ending | t (s) | centroid x (m) | x-velocity (m/s) | Theta's singular values | a second earlier | "
-          "agent at the obstacle (L/F, r_i)")  # fmt: skip
+          "agents in contact (L/F, r_i)")  # fmt: skip
     for r in rows:
         sv, sv0 = (" / ".join(f"{v:.2f}" for v in r[key]) for key in ("scales", "scales_before"))
-        who = "-"
-        if r["agent"] is not None:
-            who = f"{r['agent']} {'L' if r['leader'] else 'F'} ({', '.join(f'{v:g}' for v in r['r'])})"
+        who = "; ".join(f"{a} {'L' if lead else 'F'} ({', '.join(f'{v:g}' for v in ri)})"
+                        for a, lead, ri in zip(r["agents"], r["leader"], r["r"], strict=True)) or "-"  # fmt: skip
         print(f"{r['seed']} | {r['ending']} | {r['time']:.1f} | {r['x']:.2f} | {r['vx']:.2f} | {sv} | {sv0} | {who}")
     return 0
 

@@ -691,16 +691,14 @@ def test_obstacle_field_route_goes_through_the_lane_the_team_takes():
     assert routes(np.array([0.5]), goal_ys=np.array([-1.0]))[0] == pytest.approx(np.hypot(8.0, 1.5))  # straight
 
 
-def _windows_by_hand(eng, s, tau_step=1e-3, band_of=None):
+def _windows_by_hand(eng, s, tau_step=1e-3):
     """``crossing_windows`` from the state: each disc's room on a 1 ms grid (MovingCircle's own capsules), the
-    team's extent along x and its mean x-velocity (numpy). ``band_of`` (B, n, d): positions whose height makes the
-    band (default: the team's now)."""
+    team's extent along x and its mean x-velocity (numpy)."""
     from formation_env.env.scenarios.moving_obstacles import WINDOW_HORIZON as H
 
     t, p, mc = eng.time(s), s.params["moving_circles"], MovingCircle()
     b_y = eng.affine.fit(s.pos)[1][:, 1]
-    q = s.pos if band_of is None else band_of
-    half = 0.5 * (q[:, :, 1].max(1) - q[:, :, 1].min(1)) + eng.agent_radius
+    half = 0.5 * (s.pos[:, :, 1].max(1) - s.pos[:, :, 1].min(1)) + eng.agent_radius
     taus = np.arange(0.0, H + tau_step / 2, tau_step)
     ys = np.stack([mc.capsules(p, t + tau, eng.bounds).a[:, :, 1] for tau in taus], -1)  # (B, M, T)
     blocked = np.abs(ys - b_y[:, None, None]) - p[:, :, 4, None] - half[:, None, None] < 0
@@ -753,27 +751,3 @@ def test_moving_obstacles_crossing_windows_time_the_discs_and_the_team():
         FormationError, match="'crossing_windows' reads moving_obstacles' lanes of discs; the scenario is 'obstacle_fi"
     ):
         Engine("obstacle_field", observation=["position", "crossing_windows"])
-
-
-def test_moving_obstacles_restored_windows_use_the_goal_shapes_height():
-    """The ``restored_windows`` block: ``crossing_windows``' disc entries for the band the team would sweep with its
-    goal shape's height about its b_y now (a 1 ms scan), for every leader, while the planner squeezes the team (so
-    the two bands differ); other scenarios are refused by name."""
-    from agents.planner import make_planner
-
-    eng = Engine("moving_obstacles", observation=["position", "crossing_windows", "restored_windows"])
-    sl, cw = eng.observer.slices["restored_windows"], eng.observer.slices["crossing_windows"]
-    assert sl.stop - sl.start == 2 * 3
-    s = eng.reset(np.random.default_rng(7), 8)
-    planner = make_planner("moving_obstacles")
-    differ = False
-    for k in range(120):
-        obs = eng.observe(s)
-        want = _windows_by_hand(eng, s, band_of=s.goal).reshape(8, 3, 4)[..., :2].reshape(8, 6)
-        for i in range(eng.n_l):
-            np.testing.assert_allclose(obs[:, i, sl], want, atol=5e-3, err_msg=f"step {k}, leader {i}")
-        differ |= bool(np.abs(obs[:, 0, sl] - obs[:, 0, cw].reshape(8, 3, 4)[..., :2].reshape(8, 6)).max() > 0.1)
-        s, *_ = eng.step(s, planner(eng, s))
-    assert differ
-    with pytest.raises(FormationError, match="'restored_windows' reads moving_obstacles' lanes of discs"):
-        Engine("obstacle_field", observation=["position", "restored_windows"])

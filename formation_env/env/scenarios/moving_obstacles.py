@@ -47,7 +47,7 @@ from ..observations import observation_block
 from ..obstacles import MovingCircle, bounce_axis
 from ._base import Array, Draw, Scenario, check_range, rotation_2d
 
-__all__ = ["FORECAST", "WINDOW_HORIZON", "MovingObstacles", "band_window", "crossing_windows", "restored_windows"]
+__all__ = ["FORECAST", "WINDOW_HORIZON", "MovingObstacles", "band_window", "crossing_windows"]
 
 #: Look-ahead times (s) of the ``task`` block's room entries (0: now).
 FORECAST = (0.0, 1.0, 2.0, 3.0)
@@ -92,10 +92,6 @@ def _disc_count(engine: Any, block: str) -> int:
 
 def _window_count(engine: Any) -> int:
     return 4 * _disc_count(engine, "crossing_windows")
-
-
-def _restored_count(engine: Any) -> int:
-    return 2 * _disc_count(engine, "restored_windows")
 
 
 @jit
@@ -236,27 +232,3 @@ class MovingObstacles(Scenario):
         lo = np.array([-ext[0], -ext[1], -v] + [-ext[1]] * len(FORECAST))
         hi = np.array([ext[0], ext[1], v] + [ext[1]] * len(FORECAST))
         return np.tile(lo, self.n_moving), np.tile(hi, self.n_moving)
-
-
-@observation_block(
-    "restored_windows", _restored_count,
-    lambda e: (np.zeros(_restored_count(e)), np.full(_restored_count(e), WINDOW_HORIZON)),
-    "``moving_obstacles``, per disc in lane order (s, within H = 6 s; H: not within H): when it next enters and "
-    "then leaves the band of y the team would sweep with its goal shape's height about its fitted b_y now (the "
-    "band it grows into as it restores its shape; with ``crossing_windows``)",
-    size_text="2 M", bounds_text="[0, H]",
-)  # fmt: skip
-def restored_windows(  # pragma: no cover
-    b: int, out: Array, lo: int, leaders: NDArray[np.int64], goal: Array, bfit: Array, radius: float, now: Array,
-    mov_p0: Array, bounds: Array,
-) -> None:  # fmt: skip
-    """Per disc j: entries 2 j, 2 j + 1 of every leader's row (the team's, the same for each leader): the
-    :func:`band_window` of the band b_y +- the goal positions' half-height with the agents' discs."""
-    half = team_half_height(goal[b], radius)
-    by = bfit[b, 1]
-    for j in range(mov_p0.shape[1]):
-        c0y, vdy, r = mov_p0[b, j, 1], mov_p0[b, j, 3], mov_p0[b, j, 4]
-        t_in, t_out = band_window(c0y, vdy, r, bounds, now[b], by, half)
-        for i in range(leaders.shape[0]):
-            out[i, lo + 2 * j] = t_in
-            out[i, lo + 2 * j + 1] = t_out

@@ -34,12 +34,13 @@ def nearest_agent(engine: Engine, state: EngineState, i: int) -> int:
     return int(np.argmin(gaps))
 
 
-def nearest_pair(state: EngineState, i: int) -> tuple[int, int]:
-    """The two agents of copy ``i`` nearest each other in ``state`` (lower index first)."""
-    p = state.pos[i]
-    dist = np.linalg.norm(p[:, None] - p[None], axis=-1) + np.diag(np.full(p.shape[0], np.inf))
-    a, b = np.unravel_index(int(np.argmin(dist)), dist.shape)
-    return int(min(a, b)), int(max(a, b))
+def nearest_pair(engine: Engine, state: EngineState, i: int) -> tuple[int, int]:
+    """Of the pairs the engine checks for contact (``pair_i``, ``pair_j``), the one of copy ``i`` nearest each other
+    in ``state`` (lower index first)."""
+    gaps = np.linalg.norm(state.pos[i, engine.pair_i] - state.pos[i, engine.pair_j], axis=-1)
+    k = int(np.argmin(gaps))
+    a, b = int(engine.pair_i[k]), int(engine.pair_j[k])
+    return min(a, b), max(a, b)
 
 
 def failures(
@@ -53,12 +54,14 @@ def failures(
     r_i, m). ``env_kwargs``: as :func:`train.evaluate.evaluate`'s."""
     pol = load_policy(policy, scenario=scenario, env_kwargs=env_kwargs)
     engine = pol.engine
-    last: list[tuple[np.ndarray, np.ndarray, np.ndarray, EngineState]] = []
+    states: list[EngineState] = []
 
     def act(eng: Engine, state: EngineState, obs: Any) -> np.ndarray:
-        scales = np.linalg.svd(eng.affine.fit(state.pos)[0], compute_uv=False)
-        last.append((state.pos[:, :, 0].mean(axis=1), state.vel[:, :, 0].mean(axis=1), scales, state))
+        states.append(state)
         return pol.act_engine(eng, state, obs)
+
+    def scales(state: EngineState, i: int) -> list[float]:
+        return np.linalg.svd(engine.affine.fit(state.pos[i : i + 1])[0][0], compute_uv=False).tolist()
 
     res = run_batch(engine, act, seeds)
     lag = round(1.0 / engine.dt)
@@ -66,14 +69,13 @@ def failures(
     rows = []
     for i in np.flatnonzero(res["collision"]).tolist():
         k = int(res["steps"][i]) - 1
-        xs, vxs, svs, state = last[k]
-        x, vx, sv = xs[i], vxs[i], svs[i]
-        sv_before = last[max(k - lag, 0)][2][i]
+        state = states[k]
         ending = str(res["ending"][i])
         who = [nearest_agent(engine, state, i)] if ending == "obstacle" else []
-        who = list(nearest_pair(state, i)) if ending == "agents" else who
+        who = list(nearest_pair(engine, state, i)) if ending == "agents" else who
         rows.append({"seed": int(seeds[i]), "ending": ending, "time": float(res["steps"][i]) * engine.dt,
-                     "x": float(x), "vx": float(vx), "scales": sv.tolist(), "scales_before": sv_before.tolist(),
+                     "x": float(state.pos[i, :, 0].mean()), "vx": float(state.vel[i, :, 0].mean()),
+                     "scales": scales(state, i), "scales_before": scales(states[max(k - lag, 0)], i),
                      "agents": who, "leader": [a in leaders for a in who],
                      "r": [engine.fw.positions[a].tolist() for a in who]})  # fmt: skip
     return rows

@@ -47,7 +47,7 @@ from ..observations import observation_block
 from ..obstacles import MovingCircle, bounce_axis
 from ._base import Array, Draw, Scenario, check_range, rotation_2d
 
-__all__ = ["FORECAST", "WINDOW_HORIZON", "MovingObstacles", "band_window", "crossing_windows"]
+__all__ = ["FORECAST", "WINDOW_HORIZON", "MovingObstacles", "crossing_windows"]
 
 #: Look-ahead times (s) of the ``task`` block's room entries (0: now).
 FORECAST = (0.0, 1.0, 2.0, 3.0)
@@ -82,46 +82,12 @@ def task_row(  # pragma: no cover
                 out[i, k + 3 + q] = room - r - half
 
 
-def _disc_count(engine: Any, block: str) -> int:
+def _window_count(engine: Any) -> int:
     sc = engine.scenario
     if not isinstance(sc, MovingObstacles):
-        raise FormationError(f"observation block {block!r} reads moving_obstacles' lanes of discs; the "
+        raise FormationError(f"observation block 'crossing_windows' reads moving_obstacles' lanes of discs; the "
                              f"scenario is {sc.name!r}")  # fmt: skip
-    return sc.n_moving
-
-
-def _window_count(engine: Any) -> int:
-    return 4 * _disc_count(engine, "crossing_windows")
-
-
-@jit
-def band_window(  # pragma: no cover
-    c0y: float, vdy: float, r: float, bounds: Array, t0: float, by: float, half: float
-) -> tuple[float, float]:  # fmt: skip
-    """When a disc (start height c0y, velocity vdy, radius r, bouncing in ``bounds``) next enters and then leaves
-    the band |y - by| <= half, in s after t0, within H = :data:`WINDOW_HORIZON` (H: not within H; 0: in it now).
-
-    Its room |y_c(t) - by| - r - half is piecewise linear in t (a triangle wave), so the times are the sign changes
-    on a 0.1 s grid, interpolated."""
-    H = WINDOW_HORIZON
-    dt = _WINDOW_STEP
-    steps = round(H / dt)
-    t_in, t_out = H, H
-    prev = abs(bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], t0)[0] - by) - r - half
-    if prev < 0.0:
-        t_in = 0.0
-    for q in range(1, steps + 1):
-        room = abs(bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], t0 + q * dt)[0] - by) - r - half
-        crossed = (room < 0.0) != (prev < 0.0)
-        if crossed:
-            t = (q - 1) * dt + dt * prev / (prev - room)
-            if t_in == H and room < 0.0:
-                t_in = t
-            elif t_in < H and room >= 0.0:
-                t_out = t
-                break
-        prev = room
-    return t_in, t_out
+    return 4 * sc.n_moving
 
 
 @observation_block(
@@ -138,11 +104,14 @@ def crossing_windows(  # pragma: no cover
 ) -> None:  # fmt: skip
     """Per disc j: entries 4 j .. 4 j + 3 of every leader's row (they are the team's, the same for each leader).
 
-    The disc blocks the band while its room, |y_c(t) - b_y| - r - half, is negative (:func:`band_window`). The team
+    The disc blocks the band while its room, |y_c(t) - b_y| - r - half, is negative; the room is piecewise linear
+    in t (a triangle wave), so the times are the grid's sign changes on a 0.1 s grid, interpolated. The team
     occupies x in [min x - radius, max x + radius]; at its mean x-velocity v_x > 0 it reaches the strip
     [x_j - r, x_j + r] after (x_j - r - front) / v_x and leaves it after (x_j + r - back) / v_x (0 if already
     reached or left; H if v_x <= 0.01 m/s and not yet in it)."""
     H = WINDOW_HORIZON
+    dt = _WINDOW_STEP
+    steps = round(H / dt)
     half = team_half_height(pos[b], radius)
     by = bfit[b, 1]
     front, back, vx = -np.inf, np.inf, 0.0
@@ -154,7 +123,21 @@ def crossing_windows(  # pragma: no cover
     for j in range(mov_p0.shape[1]):
         c0x, c0y, vdx, vdy, r = mov_p0[b, j]
         x = bounce_axis(c0x, vdx, r, bounds[0, 0], bounds[1, 0], now[b])[0]
-        t_in, t_out = band_window(c0y, vdy, r, bounds, now[b], by, half)
+        t_in, t_out = H, H
+        prev = abs(bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], now[b])[0] - by) - r - half
+        if prev < 0.0:
+            t_in = 0.0
+        for q in range(1, steps + 1):
+            room = abs(bounce_axis(c0y, vdy, r, bounds[0, 1], bounds[1, 1], now[b] + q * dt)[0] - by) - r - half
+            crossed = (room < 0.0) != (prev < 0.0)
+            if crossed:
+                t = (q - 1) * dt + dt * prev / (prev - room)
+                if t_in == H and room < 0.0:
+                    t_in = t
+                elif t_in < H and room >= 0.0:
+                    t_out = t
+                    break
+            prev = room
         if back >= x + r:  # passed
             reach, leave = 0.0, 0.0
         elif vx <= 0.01:

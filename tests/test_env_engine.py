@@ -751,3 +751,58 @@ def test_moving_obstacles_crossing_windows_time_the_discs_and_the_team():
         FormationError, match="'crossing_windows' reads moving_obstacles' lanes of discs; the scenario is 'obstacle_fi"
     ):
         Engine("obstacle_field", observation=["position", "crossing_windows"])
+
+
+def _wall_clearance_by_hand(s, radius: float, reach: float) -> np.ndarray:
+    """Per env and agent (B, n, 3): the gap to the nearest of the passage's two wall segments and the unit direction
+    toward it, from the episode's wall x, gap centre and width (the scenario docstring's geometry), not the engine's
+    capsules; beyond ``reach``: reach and 0."""
+    B, n = s.pos.shape[:2]
+    out = np.zeros((B, n, 3))
+    for b in range(B):
+        xw, yc, w = (float(s.params[k][b]) for k in ("wall_x", "gap_center", "gap_width"))
+        segs = [((xw, -5.0), (xw, yc - w / 2)), ((xw, yc + w / 2), (xw, 5.0))]
+        for g in range(n):
+            p = s.pos[b, g]
+            best, vec = reach, np.zeros(2)
+            for a0, a1 in segs:
+                a0, a1 = np.array(a0), np.array(a1)
+                t = np.clip(np.dot(p - a0, a1 - a0) / np.dot(a1 - a0, a1 - a0), 0.0, 1.0)
+                c = a0 + t * (a1 - a0)
+                gap = np.linalg.norm(c - p) - radius
+                if gap < best:
+                    best, vec = gap, (c - p) / np.linalg.norm(c - p)
+            out[b, g] = [max(best, -radius), *vec]
+    return out
+
+
+def test_agent_clearance_block_is_each_agents_gap_to_the_nearest_wall():
+    """The ``agent_clearance`` block, the same in every leader's row: each agent's gap to the nearest wall segment and
+    the direction to it, against the passage's geometry worked by hand, along the planner's episodes (agents far from
+    the wall, near its edges in the gap, and past it); in the commander's state after the global state; and with no
+    obstacle (``hold``) every gap reads the sensing range."""
+    from agents.planner import make_planner
+
+    eng = Engine("narrow_passage", observation=["position", "agent_clearance"], state_blocks=["agent_clearance"])
+    sl = eng.observer.slices["agent_clearance"]
+    assert sl.stop - sl.start == eng.n * 3
+    s = eng.reset(np.random.default_rng(3), 6)
+    planner = make_planner("narrow_passage")
+    reach = eng.obstacle_range
+    closest = np.inf
+    for k in range(120):
+        want = _wall_clearance_by_hand(s, eng.agent_radius, reach).reshape(6, -1)
+        obs = eng.observe(s)[..., sl]
+        for i in range(eng.n_l):
+            np.testing.assert_allclose(obs[:, i], want, atol=1e-5, err_msg=f"step {k}, leader {i}")
+        np.testing.assert_allclose(eng.global_state(s)[:, -3 * eng.n :], want, atol=1e-5)
+        closest = min(closest, want[:, 0::3].min())
+        s, *_ = eng.step(s, planner(eng, s))
+    assert closest < 0.1  # the planner's team passed within 10 cm of a wall edge
+    far = Engine("hold", observation=["agent_clearance"])
+    o = far.observe(far.reset(np.random.default_rng(0), 2))
+    assert (
+        np.all(o[..., 0::3] == np.float32(far.obstacle_range))
+        and np.all(o[..., 1::3] == 0)
+        and np.all(o[..., 2::3] == 0)
+    )

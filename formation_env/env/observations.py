@@ -249,6 +249,58 @@ def obstacles(  # pragma: no cover
                     out[i, lo + q * d + k] = toward[j, k] / norm * mag
 
 
+def _clearance_bounds(eng: Engine) -> Bounds:
+    one_lo = np.concatenate([[-eng.agent_radius], np.full(eng.d, -1.0)])
+    one_hi = np.concatenate([[eng.obstacle_range], np.full(eng.d, 1.0)])
+    return np.tile(one_lo, eng.n), np.tile(one_hi, eng.n)
+
+
+@observation_block(
+    "agent_clearance", lambda e: e.n * (e.d + 1), _clearance_bounds,
+    "per agent (followers too, in index order; the team's, the same in every leader's row): the gap between its disc "
+    "and the nearest obstacle's surface (m, at most ``obstacle_range``), then the unit direction toward that "
+    "surface (0 beyond the range)", size_text="n (d + 1)", bounds_text="[-radius, range], [-1, 1]",
+)  # fmt: skip
+def agent_clearance(  # pragma: no cover
+    b: int, out: Array, lo: int, leaders: Ints, pos: Array, cur_a: Array, cur_e: Array, cur_r: Array, radius: float,
+    obstacle_range: float,
+) -> None:  # fmt: skip
+    """Agent g's entries lo + g (d + 1) .. lo + g (d + 1) + d: min over capsules j of |p_g - c_j| - r_j - radius,
+    c_j the nearest point of capsule j's axis a_j + t e_j (t in [0, 1]) to p_g (pos (B, n, d), cur_a and cur_e
+    (B, m, d), cur_r (B, m), m); then (c_j - p_g) / |c_j - p_g| of that capsule if the gap is within
+    ``obstacle_range``, else obstacle_range and 0."""
+    a, e, rad = cur_a[b], cur_e[b], cur_r[b]
+    n, d = pos.shape[1], pos.shape[2]
+    toward = np.empty(d)
+    for g in range(n):
+        k0 = lo + g * (d + 1)
+        best, bj, bt = obstacle_range, -1, 0.0
+        for j in range(rad.shape[0]):
+            ee = 0.0
+            t = 0.0
+            for k in range(d):
+                ee += e[j, k] * e[j, k]
+            if ee > 0.0:
+                for k in range(d):
+                    t += (pos[b, g, k] - a[j, k]) * e[j, k]
+                t = min(max(t / ee, 0.0), 1.0)
+            dd = 0.0
+            for k in range(d):
+                dd += (a[j, k] + t * e[j, k] - pos[b, g, k]) ** 2
+            gap = math.sqrt(dd) - rad[j] - radius
+            if gap < best:
+                best, bj, bt = gap, j, t
+        norm = 0.0
+        for k in range(d):
+            toward[k] = 0.0 if bj < 0 else a[bj, k] + bt * e[bj, k] - pos[b, g, k]
+            norm += toward[k] * toward[k]
+        norm = math.sqrt(norm)
+        for i in range(leaders.shape[0]):
+            out[i, k0] = max(best, -radius)
+            for k in range(d):
+                out[i, k0 + 1 + k] = toward[k] / norm if norm > 0.0 else 0.0
+
+
 @observation_block(
     "nearest_agents", lambda e: e.k_nearest * (e.d + 1), _nearest_bounds,
     "the k nearest other agents (followers too) within ``sense_radius``, nearest first: p_j - p_i (m) and "

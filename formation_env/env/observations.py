@@ -21,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from ._numba import jit
-from .obstacles import ray_range
+from .obstacles import ray_range, toward_axis
 
 #: The engine a block reads its sizes and bounds from (``formation_env.env.engine.Engine``; typed loosely so that
 #: this module needs nothing of the engine's).
@@ -224,19 +224,7 @@ def obstacles(  # pragma: no cover
         surf = np.empty(m)
         toward = np.empty((m, d))
         for j in range(m):
-            ee = 0.0
-            for k in range(d):
-                ee += e[j, k] * e[j, k]
-            t = 0.0
-            if ee > 0.0:
-                for k in range(d):
-                    t += (pos[b, ag, k] - a[j, k]) * e[j, k]
-                t = min(max(t / ee, 0.0), 1.0)
-            dd = 0.0
-            for k in range(d):
-                toward[j, k] = a[j, k] + t * e[j, k] - pos[b, ag, k]
-                dd += toward[j, k] ** 2
-            surf[j] = math.sqrt(dd) - rad[j]
+            surf[j] = toward_axis(pos[b, ag], a, e, j, toward[j]) - rad[j]
         order = np.argsort(surf, kind="mergesort")
         for q in range(n_nearest):
             for k in range(d):
@@ -271,30 +259,17 @@ def agent_clearance(  # pragma: no cover
     ``obstacle_range``, else obstacle_range and 0."""
     a, e, rad = cur_a[b], cur_e[b], cur_r[b]
     n, d = pos.shape[1], pos.shape[2]
+    vec = np.empty(d)
     toward = np.empty(d)
     for g in range(n):
         k0 = lo + g * (d + 1)
-        best, bj, bt = obstacle_range, -1, 0.0
+        best, norm = obstacle_range, 0.0
+        toward[:] = 0.0
         for j in range(rad.shape[0]):
-            ee = 0.0
-            t = 0.0
-            for k in range(d):
-                ee += e[j, k] * e[j, k]
-            if ee > 0.0:
-                for k in range(d):
-                    t += (pos[b, g, k] - a[j, k]) * e[j, k]
-                t = min(max(t / ee, 0.0), 1.0)
-            dd = 0.0
-            for k in range(d):
-                dd += (a[j, k] + t * e[j, k] - pos[b, g, k]) ** 2
-            gap = math.sqrt(dd) - rad[j] - radius
-            if gap < best:
-                best, bj, bt = gap, j, t
-        norm = 0.0
-        for k in range(d):
-            toward[k] = 0.0 if bj < 0 else a[bj, k] + bt * e[bj, k] - pos[b, g, k]
-            norm += toward[k] * toward[k]
-        norm = math.sqrt(norm)
+            dist = toward_axis(pos[b, g], a, e, j, vec)
+            if dist - rad[j] - radius < best:
+                best, norm = dist - rad[j] - radius, dist
+                toward[:] = vec
         for i in range(leaders.shape[0]):
             out[i, k0] = max(best, -radius)
             for k in range(d):

@@ -48,6 +48,7 @@ __all__ = [
     "point_clearance",
     "ray_directions",
     "ray_range",
+    "toward_axis",
 ]
 
 Array = NDArray[np.float64]
@@ -241,6 +242,26 @@ def ray_directions(n_rays: int) -> Array:
     """Unit 2D directions at angles 2 pi k / n_rays, k = 0..n_rays-1 (counter-clockwise from +x), shape (R, 2)."""
     ang = 2.0 * np.pi * np.arange(n_rays) / n_rays
     return np.stack([np.cos(ang), np.sin(ang)], axis=1)
+
+
+@jit
+def toward_axis(p: Array, a: Array, e: Array, j: int, out: Array) -> float:  # pragma: no cover
+    """The vector from the point p (d,) to the nearest point a_j + t e_j (t in [0, 1]) of capsule j's axis (a, e
+    (m, d)), written into out (d,); returns its length (m)."""
+    d = p.shape[0]
+    ee = 0.0
+    t = 0.0
+    for k in range(d):
+        ee += e[j, k] * e[j, k]
+    if ee > 0.0:
+        for k in range(d):
+            t += (p[k] - a[j, k]) * e[j, k]
+        t = min(max(t / ee, 0.0), 1.0)
+    dd = 0.0
+    for k in range(d):
+        out[k] = a[j, k] + t * e[j, k] - p[k]
+        dd += out[k] ** 2
+    return math.sqrt(dd)
 
 
 @jit

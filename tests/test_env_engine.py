@@ -213,6 +213,47 @@ def test_step_is_pure():
     np.testing.assert_array_equal(eng.observe(s), eng.observe(copy))
 
 
+@pytest.mark.parametrize(
+    ("scenario", "kwargs"),
+    [
+        ("narrow_passage", {"state_blocks": ["task", "agent_clearance"], "obs_noise": 0.1}),
+        ("obstacle_field", {"follower_law": "linear", "network": {"loss": 0.3, "quantise": ("uniform", 0.05)}}),
+        ("moving_obstacles", {"state_blocks": ["task", "crossing_windows", "obstacles"]}),
+        ("obstacle_field", {"state_blocks": ["task", "agent_clearance"]}),
+        ("hold", {}),
+        (
+            "narrow_passage",
+            {"state_blocks": ["task"], "follower_law": "linear", "network": {"delay": 1, "jitter": (0.08, 0.12)}},
+        ),
+    ],
+)
+def test_the_state_observing_step_gives_the_commanders_state_to_the_last_bit(scenario, kwargs):
+    """``advance(observe="state")`` (what the commander envs run) computes the global state's blocks inside the
+    step, without the leaders' observations or their noise: the same next state, rewards and info as the
+    leaders' step, and the same global state, to the last bit, as ``global_state`` computes from the state alone."""
+    eng = Engine(scenario, **kwargs)
+    B = 70  # the threaded step (PARALLEL_FROM)
+    s = eng.reset(np.random.default_rng(4), B)
+    rng = np.random.default_rng(9)
+    for _ in range(40):
+        a = rng.uniform(-1, 1, (B, eng.n_l, eng.p))
+        new, ctx, rew, term, trunc, info = eng.advance(s, a, np.random.default_rng(1), observe="state")
+        ref, ref_ctx, ref_rew, ref_term, ref_trunc, ref_info = eng.advance(s, a, np.random.default_rng(1))
+        assert ctx.obs is None and ref_ctx.blocks is None and ref_ctx.obs is not None
+        assert (ctx.blocks is None) == (not kwargs.get("state_blocks"))
+        for f in (f for f in new._fields if f != "params"):
+            if getattr(new, f) is not None:
+                np.testing.assert_array_equal(getattr(new, f), getattr(ref, f), err_msg=f)
+        for got, want in ((rew, ref_rew), (term, ref_term), (trunc, ref_trunc), (ctx.theta, ref_ctx.theta)):
+            np.testing.assert_array_equal(got, want)
+        for key in INFO_KEYS:
+            np.testing.assert_array_equal(info[key], ref_info[key], err_msg=key)
+        np.testing.assert_array_equal(eng.global_state(new, ctx), eng.global_state(new))
+        s = new
+    with pytest.raises(FormationError, match="observe must be one of"):
+        eng.advance(s, a, observe="global")
+
+
 def test_sparse_path_matches_the_dense_path(monkeypatch):
     """The same framework stepped with a dense stress (the law's map) and, above a lowered threshold, a CSR stress
     (the core law itself): the same states, observations, rewards, and every info key with its unit."""

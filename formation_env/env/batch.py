@@ -246,11 +246,14 @@ class FormationBatch:
         pose = self.pose
         if self.command is not None and pose is not None:
             pose, a = self.command.step(self.state, pose, a)
-        state, ctx, rew, term, trunc, info = self.engine.advance(self.state, a, self._rngs if rngs is None else rngs)
+        view = "state" if self.mode == "commander" else "leaders"  # a commander reads the global state
+        state, ctx, rew, term, trunc, info = self.engine.advance(
+            self.state, a, self._rngs if rngs is None else rngs, observe=view
+        )
         if self.max_episode_steps is not None:
             trunc = trunc | (state.k >= self.max_episode_steps)
         self.last_info, self.last_terminated, self.last_truncated = info, term, trunc
-        lobs = ctx.obs if self.mode == "shared" else None  # a commander reads the global state
+        lobs = ctx.obs if self.mode == "shared" else None
         obs = self._observe(state, lobs, pose=pose, ctx=ctx)
         rews = (rew.reshape(-1) if k > 1 else rew.mean(axis=1)).astype(np.float32)
         done_env = term | trunc

@@ -147,7 +147,7 @@ class FormationCommanderEnv(SingleEnv, gym.Env[NDArray[np.float32], NDArray[np.f
             leader_a = a.reshape(1, eng.n_l, eng.p)
         else:
             self._pose, leader_a = self.command.step(state, self._pose, a[None])
-        self._state, ctx, rew, term, trunc, inf = eng.advance(state, leader_a, self.np_random)
+        self._state, ctx, rew, term, trunc, inf = eng.advance(state, leader_a, self.np_random, observe="state")
         out = StepInfo({key: val[0].item() for key, val in inf.items() if key != "control_effort"})
         out["control_effort"] = float(inf["control_effort"][0].sum())
         terminated, truncated = bool(term[0]), bool(trunc[0])

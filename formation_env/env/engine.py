@@ -78,6 +78,8 @@ PARALLEL_FROM = 64
 #: Placeholders of the compiled step's optional inputs (no law state given, no observation noise).
 _NO_STATE = np.zeros((0, 0, 0))
 _NO_NOISE = np.zeros((0, 0, 0))
+#: What :meth:`Engine.advance` can observe of the new state: the leaders' observations or the global state's blocks.
+OBSERVE = ("leaders", "state")
 #: The fields of ``EngineState`` but ``params``.
 _FIELDS = tuple(f for f in EngineState._fields if f != "params")
 #: The state's fields the compiled step takes, in its argument order (``kernel.step_inputs``), without and with a
@@ -289,6 +291,7 @@ class Engine:
         self.state_observer = Observer(self, tuple(state_blocks), 0.0, "state_blocks") if state_blocks else None
         self._build_state_bounds()
         self._compiled: tuple[Array, Any, Any] | None = None
+        self._state_step: Any = None
         self._consts: Consts | None = None
         self._net_consts: NetConsts | None = None
         self._compose()  # every component's parameters are checked now, not at the first step
@@ -437,28 +440,45 @@ class Engine:
 
     def __getstate__(self) -> dict[str, Any]:
         """Everything but the compiled step (a module), which the copy composes again on its first step."""
-        return {**self.__dict__, "_compiled": None, "_consts": None, "_net_consts": None}
+        return {**self.__dict__, "_compiled": None, "_state_step": None, "_consts": None, "_net_consts": None}
 
     # ------------------------------------------------------------------ the compiled step
     def _compose(self) -> tuple[Array, Any, Any]:
         """The reward weights of the composed terms, the compiled step's module and the state blocks' (or None):
         :func:`~formation_env.env.kernel.compose` of this engine's components."""
         if self._compiled is None:
-            sc = self.scenario
-
-            def blocks(obs: Observer) -> list[tuple[str, Any, int]]:
-                return [(blk.name, blk.row if blk.name != "task" else sc.task_row, obs.slices[blk.name].start)
-                        for blk in obs.blocks]  # fmt: skip
-
             terms = self._terms
-            moving = [ob.row for ob in self._moving]
-            mod = compose(blocks(self.observer), [(t, TERMS[t].row) for t in terms], sc.route_row, moving, sc.pose_row,
-                          network=self._net is not None, timed=self._timed)  # fmt: skip
             so = self.state_observer
-            smod = (compose(blocks(so), [], sc.route_row, moving, sc.pose_row, network=self._net is not None,
-                            timed=self._timed) if so is not None else None)  # fmt: skip
+            mod = self._module(self.observer, terms)
+            smod = self._module(so, ()) if so is not None else None
             self._compiled = (np.array([self.reward_weights[t] for t in terms]), mod, smod)
         return self._compiled
+
+    def _module(self, observer: Observer | None, terms: Sequence[str]) -> Any:
+        """The compiled module of this engine's step whose observation is ``observer``'s blocks (None: no
+        observation at all), with the reward ``terms``."""
+        sc = self.scenario
+        blocks = []
+        if observer is not None:
+            blocks = [(blk.name, blk.row if blk.name != "task" else sc.task_row, observer.slices[blk.name].start)
+                      for blk in observer.blocks]  # fmt: skip
+        return compose(blocks, [(t, TERMS[t].row) for t in terms], sc.route_row, [ob.row for ob in self._moving],
+                       sc.pose_row, network=self._net is not None, timed=self._timed)  # fmt: skip
+
+    def _state_kernel(self) -> tuple[Consts, Any]:
+        """The constants and module of the step that observes the global state's blocks in place of the leaders'
+        observations (``advance(observe="state")``; composed at its first use)."""
+        c, _ = self._kernel()
+        if self._state_step is None:
+            self._state_step = self._module(self.state_observer, self._terms)
+        return self._state_consts(c), self._state_step
+
+    def _state_consts(self, c: Consts) -> Consts:
+        """``c`` with the state blocks' bounds and no noise (no blocks: empty bounds)."""
+        so = self.state_observer
+        if so is None:
+            return c._replace(obs_low=np.zeros(0), obs_high=np.zeros(0), noise_mask=np.zeros(0))
+        return c._replace(obs_low=so.low, obs_high=so.high, noise_mask=so.noise_mask)
 
     def _kernel(self) -> tuple[Consts, Any]:
         """The constants of the compiled step and its module (composed once per engine; the constants again
@@ -536,6 +556,7 @@ class Engine:
     ) -> tuple[EngineState, NDArray[np.float32], Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, NDArray[Any]]]:
         """One sample of every environment: :meth:`advance`, and every leader's observation of the new state."""
         new, ctx, rew, terminated, truncated, info = self.advance(state, actions, rng)
+        assert ctx.obs is not None  # observe="leaders"
         return new, ctx.obs, rew, terminated, truncated, info
 
     def advance(
@@ -543,6 +564,7 @@ class Engine:
         state: EngineState,
         actions: ArrayLike,
         rng: np.random.Generator | Sequence[np.random.Generator] | None = None,
+        observe: str = "leaders",
     ) -> tuple[EngineState, StepContext, Array, NDArray[np.bool_], NDArray[np.bool_], dict[str, NDArray[Any]]]:
         """One sample of every environment (the compiled step of :mod:`~formation_env.env.kernel`).
 
@@ -551,6 +573,10 @@ class Engine:
             actions: leader actions in [-1, 1], shape (B, n_l, p); values outside are clipped, NaN or inf raise
                 ValueError (and nothing changes).
             rng: the generator of observation noise (needed only with ``obs_noise`` > 0), or one per env.
+            observe: what the step observes of the new state: ``"leaders"``, every leader's observation
+                (``StepContext.obs``); ``"state"``, the global state's blocks (``StepContext.blocks``, the
+                ``state_blocks`` of every leader, None without them; no leader observation is computed and no
+                noise drawn): what a commander reads, which :meth:`global_state` then takes from the context.
         Returns:
             (state', the step's :class:`StepContext` (observations and affine fit), rewards (B, n_l),
             terminated (B,), truncated (B,), info) with the arrays (B,) of ``INFO_KEYS`` (control_effort
@@ -559,15 +585,18 @@ class Engine:
         """
         if not isinstance(state, EngineState):
             raise TypeError(f"state must be an EngineState (from reset), got {type(state).__name__}")
+        if observe not in OBSERVE:
+            raise FormationError(f"observe must be one of {list(OBSERVE)}, got {observe!r}")
         B = state.batch_size
         a = np.array(self.check_actions(actions, B), dtype=np.float64)
-        c, mod = self._kernel()
+        leaders = observe == "leaders"
+        c, mod = self._kernel() if leaders else self._state_kernel()
         x1: Array = _NO_STATE
         mem1: Array = _NO_STATE
         if self._M is None and self._net is None:  # sparse stress: the core law itself, then the compiled rest
             x1, law_mem = self.law.step(state.x, self.u_max * np.clip(a, -1.0, 1.0), state.memory)
             mem1 = _NO_STATE if law_mem is None else law_mem
-        args = self._args(c, state, a, x1, mem1, self._noise(B, rng))
+        args = self._args(c, state, a, x1, mem1, self._noise(B, rng) if leaders else _NO_NOISE)
         threaded = B >= PARALLEL_FROM and numba.get_num_threads() > 1
         raw, obs, rew = (mod.step_parallel if threaded else mod.step)(*args)
         out: Any = Outputs._make(raw if self._net is not None else (*raw, *_NO_NET_OUT))  # fields: kernel.ARRAYS
@@ -592,23 +621,26 @@ class Engine:
             "control_effort": out.effort,
             "lost_fraction": lost,
         }
-        return new, StepContext(obs, out.theta), rew, f[:, FLAG_TERMINATED], f[:, FLAG_TRUNCATED], info
+        blocks = None if leaders or self.state_observer is None else obs
+        ctx = StepContext(obs if leaders else None, out.theta, blocks)
+        return new, ctx, rew, f[:, FLAG_TERMINATED], f[:, FLAG_TRUNCATED], info
 
     def global_state(self, state: EngineState, ctx: StepContext | None = None) -> NDArray[np.float32]:
         """Global state vectors, shape (B, state_dim), float32: positions, velocities, goal positions and
         velocities of all agents, formation error, fitted Theta (row-major), the scenario's parameters, the
         moving obstacles' current state, time fraction; then the ``state_blocks`` of every leader, if any.
         ``ctx``: the context of the step that made ``state`` (from :meth:`advance`), if at hand: its affine fit
-        is reused."""
+        is reused, and so are its state blocks (``advance(observe="state")``)."""
         B = state.batch_size
         blocks = None
-        if self.state_observer is not None:
+        if ctx is not None and ctx.blocks is not None:
+            blocks, theta = ctx.blocks, ctx.theta
+        elif self.state_observer is not None:
             c, _ = self._kernel()
             acts = np.zeros((B, self.n_l, self.p))
-            so = self.state_observer
-            c = c._replace(obs_low=so.low, obs_high=so.high, noise_mask=so.noise_mask)
             smod = (self._compiled or self._compose())[2]
-            blocks, theta = smod.observe(*self._args(c, state, acts, _NO_STATE, _NO_STATE, _NO_NOISE))
+            args = self._args(self._state_consts(c), state, acts, _NO_STATE, _NO_STATE, _NO_NOISE)
+            blocks, theta = smod.observe(*args)
         else:
             theta = self._fit(state.pos)[0] if ctx is None else ctx.theta
         t = self.time(state)

@@ -65,10 +65,13 @@ class EngineState(NamedTuple):
 
 class StepContext(NamedTuple):
     """What a step computed beside the new state: every leader's observation ``obs`` (B, n_l, obs_dim) float32
-    and the least-squares affine fit ``theta`` (B, d, d) of all agents (reused by the global state)."""
+    (None when the step observed the global state's blocks instead), the least-squares affine fit ``theta``
+    (B, d, d) of all agents, and the global state's blocks ``blocks`` (B, n_l, state block dim) float32 (None
+    unless the step observed them); the global state reuses the last two."""
 
-    obs: NDArray[np.float32]
+    obs: NDArray[np.float32] | None
     theta: Array
+    blocks: NDArray[np.float32] | None = None
 
 
 class StepInfo(dict[str, Any]):

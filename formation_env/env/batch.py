@@ -253,8 +253,7 @@ class FormationBatch:
         if self.max_episode_steps is not None:
             trunc = trunc | (state.k >= self.max_episode_steps)
         self.last_info, self.last_terminated, self.last_truncated = info, term, trunc
-        lobs = ctx.obs if self.mode == "shared" else None
-        obs = self._observe(state, lobs, pose=pose, ctx=ctx)
+        obs = self._observe(state, ctx.obs, pose=pose, ctx=ctx)
         rews = (rew.reshape(-1) if k > 1 else rew.mean(axis=1)).astype(np.float32)
         done_env = term | trunc
         dones = np.repeat(done_env, k) if k > 1 else done_env.copy()

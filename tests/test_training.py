@@ -561,6 +561,30 @@ def test_adaptive_learning_rate_follows_each_updates_kl(tmp_path: Path, capsys: 
     assert model.learning_rate(0.0) == pytest.approx(1e-3 / 1.5**3)  # 4 updates, adapted after the first 3
 
 
+def test_entropy_coefficient_schedule_sets_each_update_s_bonus(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``ent_coef: lin_<value>_from_<f>``: PPO's entropy bonus held over the fraction f of training, then linear to 0,
+    set before each update from the fraction of training left after its rollout; refused for SAC."""
+    from stable_baselines3 import PPO
+
+    from train.leaders import EntropySchedule
+
+    seen: list[float] = []
+
+    class Spy(EntropySchedule):
+        def _on_rollout_end(self) -> None:
+            super()._on_rollout_end()
+            seen.append(self.model.ent_coef)
+
+    monkeypatch.setattr("train.leaders.EntropySchedule", Spy)
+    train("ppo", "commander", "hold", timesteps=256, out=tmp_path, n_envs=2, eval_episodes=0,
+          algo_kwargs={"n_steps": 32, "batch_size": 64, "n_epochs": 1, "ent_coef": "lin_0.02_from_0.5"})  # fmt: skip
+    # 4 rollouts of 64 samples: 3/4, 1/2, 1/4 and 0 of training left after each
+    assert seen == pytest.approx([0.02, 0.02, 0.01, 0.0])
+    assert PPO.load(tmp_path / "hold_commander.zip").ent_coef == 0.0
+    with pytest.raises(ValueError, match=r"algo_kwargs\['ent_coef'\]: a schedule is for ppo only"):
+        train("sac", "commander", "hold", out=tmp_path / "sac", smoke=True, algo_kwargs={"ent_coef": "lin_0.1"})
+
+
 def test_fixed_statistics_map_the_bounds_onto_plus_minus_one_and_do_not_move() -> None:
     from agents.normalization import FixedMeanStd
 
@@ -606,11 +630,14 @@ def test_noise_gap_reports_the_noise_and_both_ways_of_acting(tmp_path: Path) -> 
           policy_kwargs={"log_std_init": 0.5})  # fmt: skip
     path = str(tmp_path / "hold_commander.zip")
     gap = noise_gap(path, 3, seed=5)
+    assert {"success_rate", "collision_rate", "time_to_goal"} == set(gap["deterministic"]) == set(gap["sampled"])
     std = np.exp(LearnedPolicy.load(path).model.policy.log_std.detach().numpy())
     np.testing.assert_allclose(gap["noise"], std, atol=1e-3)
     m = evaluate(path, None, 3, seed=5, generalisation=False)["metrics"]
-    assert gap["deterministic"] == {k: m[k] for k in ("success_rate", "collision_rate")}
-    assert noise_gap(path, 3, seed=5)["sampled"] == gap["sampled"]
+    keys = ("success_rate", "collision_rate", "time_to_goal")
+    np.testing.assert_equal([gap["deterministic"][k] for k in keys], [m[k] for k in keys])  # NaN: no success
+    again = noise_gap(path, 3, seed=5)["sampled"]
+    np.testing.assert_equal([again[k] for k in keys], [gap["sampled"][k] for k in keys])
 
 
 def test_reward_curriculum_moves_the_compiled_steps_weights() -> None:

@@ -2,11 +2,13 @@
 
 Entries (:data:`ENTRIES`): ``random`` (uniform actions, seeded), ``analytic`` (the scenario's tuned planner,
 :mod:`agents.planner`), and the learned ones, ``ppo_commander`` (one policy on the global state, from
-scratch), ``ppo_shared`` (decentralised leaders sharing one policy), ``sac_commander`` and ``ppo_residual`` (a
-learned correction on the planner: action = planner + scale policy, ``train.leaders --residual``). A learned entry is
-the policies ``<scenario>_<entry>_seed<k>.zip`` found in the policy folder (``agents/pretrained/`` by
-default), one per training seed: its metrics are the mean over seeds of each seed's suite metrics, with the
-spread across seeds (min, max) beside them. An entry with no shipped policy is listed as not trained.
+scratch), ``ppo_shared`` (decentralised leaders sharing one policy), ``sac_commander``, ``ppo_residual`` (a
+learned correction on the planner: action = planner + scale policy, ``train.leaders --residual``) and
+``ppo_commander_ttg`` (a second commander from scratch where ``ppo_commander``'s recipe is the quick one to train:
+its reward's potential is the team's time to go and it trains longer). A learned entry is the policies
+``<scenario>_<entry>_seed<k>.zip`` found in the policy folder (``agents/pretrained/`` by default), one per training
+seed: its metrics are the mean over seeds of each seed's suite metrics, with the spread across seeds (min, max)
+beside them. An entry with no shipped policy is listed as not trained.
 
 Every entry of a scenario meets the same episodes (seeds ``seed .. seed + episodes - 1``). Beside the time
 to goal stands ``time_lower_bound``: the mean over the same solved episodes of :mod:`agents.bounds`' lower
@@ -54,6 +56,7 @@ LEARNED: dict[str, tuple[str, str]] = {
     "ppo_shared": ("ppo", "shared"),
     "sac_commander": ("sac", "commander"),
     "ppo_residual": ("ppo", "commander"),
+    "ppo_commander_ttg": ("ppo", "commander"),
 }
 #: Every entry, in table order.
 ENTRIES: tuple[str, ...] = ("random", "analytic", *LEARNED)
@@ -215,7 +218,9 @@ def markdown(board: dict[str, Any], command: str) -> str:
         "episode's samples (m), and `max_formation_err`: the largest formation error once the team has formed, "
         "from the first sample whose error is at most a tenth of the scenario's success tolerance (5 mm for the "
         "default 0.05 m), so that the followers' start noise is not counted (m). `ppo_residual`: a "
-        "correction learned on top of the planner (action = planner + scale policy), not from scratch. Learned "
+        "correction learned on top of the planner (action = planner + scale policy), not from scratch. "
+        "`ppo_commander_ttg`: a second commander from scratch where `ppo_commander`'s recipe is the quick one to "
+        "train: its reward's potential is the team's time to go and it trains longer (docs/learning.md). Learned "
         "entries: mean over training seeds, (min to max across seeds) beside it; `-`: not trained or no episode "
         "solved.",
         "",

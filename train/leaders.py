@@ -211,6 +211,24 @@ class KLAdaptation(BaseCallback):
         return True
 
 
+class EntropySchedule(BaseCallback):
+    """An entropy coefficient that follows a :class:`LinearSchedule` (``ent_coef: lin_<value>_from_<f>`` in a recipe:
+    held over the fraction ``f`` of training, then shrinking linearly to 0). SB3's PPO takes a float, so this sets
+    ``model.ent_coef`` before each update from the fraction of training left after the rollout, as SB3 computes it
+    for its own schedules."""
+
+    def __init__(self, schedule: LinearSchedule) -> None:
+        super().__init__()
+        self.schedule = schedule
+
+    def _on_rollout_end(self) -> None:
+        remaining = 1.0 - float(self.model.num_timesteps) / float(self.model._total_timesteps)
+        self.model.ent_coef = float(self.schedule(remaining))  # type: ignore[attr-defined]  # PPO's
+
+    def _on_step(self) -> bool:
+        return True
+
+
 _SCHEDULE = re.compile(r"lin_(?P<initial>[^_]+)(_from_(?P<start>[^_]+))?")
 _ADAPTIVE = re.compile(r"kl_(?P<initial>[^_]+)_(?P<target>[^_]+)(_from_(?P<start>[^_]+))?")
 
@@ -572,6 +590,12 @@ def train(
     if algo == "ppo":
         hp["batch_size"] = min(int(hp["batch_size"]), int(hp["n_steps"]) * venv.num_envs)
     cls = PPO if algo == "ppo" else SAC
+    hps = schedules(hp)
+    ent_schedule = isinstance(hps.get("ent_coef"), LinearSchedule)
+    if ent_schedule and algo != "ppo":
+        raise ValueError(
+            f"algo_kwargs['ent_coef']: a schedule is for ppo only (SAC tunes its own), got {hp['ent_coef']!r}"
+        )
     policy: Any = "MlpPolicy"
     if central_critic:
         from agents.central_critic import LocalActorPolicy
@@ -585,7 +609,7 @@ def train(
         device="cpu",
         tensorboard_log=str(out / "tb"),
         verbose=0,
-        **schedules(hp),
+        **{**hps, **({"ent_coef": float(hps["ent_coef"](1.0))} if ent_schedule else {})},
     )
     curve = CurveCallback()
     ckpt = CheckpointCallback(
@@ -599,6 +623,8 @@ def train(
     callbacks: list[BaseCallback] = [curve, ckpt, *extra_callbacks]
     if isinstance(model.learning_rate, AdaptiveLR):
         callbacks.append(KLAdaptation(model.learning_rate))
+    if ent_schedule:
+        callbacks.append(EntropySchedule(hps["ent_coef"]))
     if curriculum is not None:
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:

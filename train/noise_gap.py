@@ -3,7 +3,8 @@
 ``python -m train.noise_gap --policy P [--episodes N] [--seed S]`` prints the policy's action noise (the standard
 deviation of its Gaussian, per action entry) and its success and collision rates on the suite ``S .. S + N - 1``
 acting on its mean action (as every evaluation does) and sampling its Gaussian (as in training; torch seeded with
-``S``). A large gap says the mean action is not a plan: the noise picks what the mean does not.
+``S``), with each way's mean time to goal (s). A large gap says the mean action is not a plan: the noise picks what
+the mean does not.
 """
 
 from __future__ import annotations
@@ -21,7 +22,8 @@ from .evaluate import evaluate
 
 
 def noise_gap(policy: str, episodes: int = 100, seed: int = 0) -> dict[str, object]:
-    """{"noise": per-entry standard deviation, "deterministic" / "sampled": {success_rate, collision_rate}}."""
+    """{"noise": per-entry standard deviation, "deterministic" / "sampled": {success_rate, collision_rate,
+    time_to_goal}}."""
     import torch
 
     pol = LearnedPolicy.load(policy)
@@ -30,7 +32,7 @@ def noise_gap(policy: str, episodes: int = 100, seed: int = 0) -> dict[str, obje
         pol.deterministic = det
         torch.manual_seed(seed)
         m = evaluate(pol, None, episodes, seed, generalisation=False)["metrics"]
-        out[key] = {k: m[k] for k in ("success_rate", "collision_rate")}
+        out[key] = {k: m[k] for k in ("success_rate", "collision_rate", "time_to_goal")}
     return out
 
 

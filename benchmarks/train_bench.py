@@ -186,7 +186,7 @@ def bench_peer(steps: int, quick: bool, recipe: Path, seed: int = 0) -> Row:
         POLICY_DEFAULTS,
         SMOKE_OVERRIDES,
         load_config,
-        schedules,
+        sb3_schedules,
         set_threads,
         usable_cores,
     )
@@ -208,10 +208,11 @@ def bench_peer(steps: int, quick: bool, recipe: Path, seed: int = 0) -> Row:
     venv = VecNormalize(VecMonitor(raw), norm_obs=True, norm_reward=True, clip_obs=10.0, gamma=0.99)
     hp["batch_size"] = min(int(hp["batch_size"]), int(hp["n_steps"]) * venv.num_envs)
     set_random_seed(seed)  # PPO(seed=...) would call the missing seed()
-    model = PPO("MlpPolicy", venv, policy_kwargs=pk, device="cpu", verbose=0, **schedules(hp))
+    args, schedule_callbacks = sb3_schedules(hp)  # the recipe's schedules, applied as train.leaders applies them
+    model = PPO("MlpPolicy", venv, policy_kwargs=pk, device="cpu", verbose=0, **args)
     model.action_space.seed(seed)
     timer = TimeShares()
-    model.learn(int(steps), callback=[timer])
+    model.learn(int(steps), callback=[timer, *schedule_callbacks])
     venv.close()
     peer = {"algo": "ppo", "mode": "shared", "scenario": "simple_spread"}
     row = _row("mpe2 simple_spread_v3 N=3 (SuperSuit)", peer, timer)

@@ -256,6 +256,20 @@ def schedules(hp: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def sb3_schedules(hp: dict[str, Any]) -> tuple[dict[str, Any], list[BaseCallback]]:
+    """SB3's arguments for ``hp`` (:func:`schedules` applied) and the callbacks that apply what SB3 does not: the
+    learning rate's adaptation to each update's KL divergence (:class:`KLAdaptation`) and an entropy coefficient's
+    schedule (:class:`EntropySchedule`; SB3 is given its first value)."""
+    out = schedules(hp)
+    callbacks: list[BaseCallback] = []
+    if isinstance(out.get("learning_rate"), AdaptiveLR):
+        callbacks.append(KLAdaptation(out["learning_rate"]))
+    if isinstance(out.get("ent_coef"), LinearSchedule):
+        callbacks.append(EntropySchedule(out["ent_coef"]))
+        out["ent_coef"] = float(out["ent_coef"](1.0))
+    return out, callbacks
+
+
 class ResidualVecEnv(VecEnvWrapper):
     """Commander actions as corrections of the analytic planner: a = clip(planner + scale * action, -1, 1).
 
@@ -590,12 +604,11 @@ def train(
     if algo == "ppo":
         hp["batch_size"] = min(int(hp["batch_size"]), int(hp["n_steps"]) * venv.num_envs)
     cls = PPO if algo == "ppo" else SAC
-    hps = schedules(hp)
-    ent_schedule = isinstance(hps.get("ent_coef"), LinearSchedule)
-    if ent_schedule and algo != "ppo":
+    if algo != "ppo" and str(hp.get("ent_coef", "")).startswith("lin_"):
         raise ValueError(
             f"algo_kwargs['ent_coef']: a schedule is for ppo only (SAC tunes its own), got {hp['ent_coef']!r}"
         )
+    hps, schedule_callbacks = sb3_schedules(hp)
     policy: Any = "MlpPolicy"
     if central_critic:
         from agents.central_critic import LocalActorPolicy
@@ -609,7 +622,7 @@ def train(
         device="cpu",
         tensorboard_log=str(out / "tb"),
         verbose=0,
-        **{**hps, **({"ent_coef": float(hps["ent_coef"](1.0))} if ent_schedule else {})},
+        **hps,
     )
     curve = CurveCallback()
     ckpt = CheckpointCallback(
@@ -621,10 +634,7 @@ def train(
     if progress_bar is None:
         progress_bar = sys.stdout.isatty() and not smoke
     callbacks: list[BaseCallback] = [curve, ckpt, *extra_callbacks]
-    if isinstance(model.learning_rate, AdaptiveLR):
-        callbacks.append(KLAdaptation(model.learning_rate))
-    if ent_schedule:
-        callbacks.append(EntropySchedule(hps["ent_coef"]))
+    callbacks += schedule_callbacks
     if curriculum is not None:
         callbacks.append(ToleranceCurriculum(base.engine, *curriculum, int(timesteps)))
     if range_curriculum is not None:

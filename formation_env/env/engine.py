@@ -291,7 +291,6 @@ class Engine:
         self.state_observer = Observer(self, tuple(state_blocks), 0.0, "state_blocks") if state_blocks else None
         self._build_state_bounds()
         self._compiled: tuple[Array, Any, Any] | None = None
-        self._state_step: Any = None
         self._consts: Consts | None = None
         self._net_consts: NetConsts | None = None
         self._compose()  # every component's parameters are checked now, not at the first step
@@ -440,17 +439,17 @@ class Engine:
 
     def __getstate__(self) -> dict[str, Any]:
         """Everything but the compiled step (a module), which the copy composes again on its first step."""
-        return {**self.__dict__, "_compiled": None, "_state_step": None, "_consts": None, "_net_consts": None}
+        return {**self.__dict__, "_compiled": None, "_consts": None, "_net_consts": None}
 
     # ------------------------------------------------------------------ the compiled step
     def _compose(self) -> tuple[Array, Any, Any]:
-        """The reward weights of the composed terms, the compiled step's module and the state blocks' (or None):
-        :func:`~formation_env.env.kernel.compose` of this engine's components."""
+        """The reward weights of the composed terms, the compiled step's module observing the leaders and the one
+        observing the global state's blocks (``advance(observe="state")``; its ``observe`` serves
+        :meth:`global_state`): :func:`~formation_env.env.kernel.compose` of this engine's components."""
         if self._compiled is None:
             terms = self._terms
-            so = self.state_observer
             mod = self._module(self.observer, terms)
-            smod = self._module(so, ()) if so is not None else None
+            smod = self._module(self.state_observer, terms)
             self._compiled = (np.array([self.reward_weights[t] for t in terms]), mod, smod)
         return self._compiled
 
@@ -467,11 +466,9 @@ class Engine:
 
     def _state_kernel(self) -> tuple[Consts, Any]:
         """The constants and module of the step that observes the global state's blocks in place of the leaders'
-        observations (``advance(observe="state")``; composed at its first use)."""
+        observations (``advance(observe="state")``)."""
         c, _ = self._kernel()
-        if self._state_step is None:
-            self._state_step = self._module(self.state_observer, self._terms)
-        return self._state_consts(c), self._state_step
+        return self._state_consts(c), (self._compiled or self._compose())[2]
 
     def _state_consts(self, c: Consts) -> Consts:
         """``c`` with the state blocks' bounds and no noise (no blocks: empty bounds)."""
@@ -636,11 +633,9 @@ class Engine:
         if ctx is not None and ctx.blocks is not None:
             blocks, theta = ctx.blocks, ctx.theta
         elif self.state_observer is not None:
-            c, _ = self._kernel()
+            c, smod = self._state_kernel()
             acts = np.zeros((B, self.n_l, self.p))
-            smod = (self._compiled or self._compose())[2]
-            args = self._args(self._state_consts(c), state, acts, _NO_STATE, _NO_STATE, _NO_NOISE)
-            blocks, theta = smod.observe(*args)
+            blocks, theta = smod.observe(*self._args(c, state, acts, _NO_STATE, _NO_STATE, _NO_NOISE))
         else:
             theta = self._fit(state.pos)[0] if ctx is None else ctx.theta
         t = self.time(state)

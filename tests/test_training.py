@@ -585,6 +585,47 @@ def test_entropy_coefficient_schedule_sets_each_update_s_bonus(tmp_path: Path, m
         train("sac", "commander", "hold", out=tmp_path / "sac", smoke=True, algo_kwargs={"ent_coef": "lin_0.1"})
 
 
+def test_action_std_cap_bounds_each_rollout_s_deviation_falling_to_its_final_value(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``action_std_cap: <final>_from_<f>``: the policy's own deviation over the fraction f of training, then a bound
+    falling geometrically from its largest deviation at f to ``final``, applied before each rollout and to the saved
+    policy; malformed values and SAC are refused, naming the argument."""
+    import math
+
+    from stable_baselines3 import PPO
+
+    from train.leaders import ActionStdCap
+
+    seen: list[list[float]] = []
+
+    class Spy(ActionStdCap):
+        def _on_rollout_start(self) -> None:
+            super()._on_rollout_start()
+            seen.append(self.model.policy.log_std.detach().tolist())
+
+    monkeypatch.setattr("train.leaders.ActionStdCap", Spy)
+    train("ppo", "commander", "hold", timesteps=256, out=tmp_path, n_envs=2, eval_episodes=0,
+          algo_kwargs={"n_steps": 32, "batch_size": 64, "n_epochs": 1, "action_std_cap": "0.1_from_0.5"},
+          policy_kwargs={"log_std_init": 0.0})  # fmt: skip
+    # 4 rollouts of 64 samples, starting at 0, 1/4, 1/2 and 3/4 of training
+    assert len(seen) == 4
+    free = seen[2]  # at 1/2 the bound starts at the policy's own largest deviation: nothing clamped yet
+    assert max(abs(v) for v in seen[0] + seen[1] + free) < 0.1  # one update of 64 samples moves log_std a little
+    half_way = max(free) + 0.5 * (math.log(0.1) - max(free))  # geometric: half way in log at 3/4
+    assert seen[3] == pytest.approx([half_way] * len(free))  # every entry was above it
+    model = PPO.load(tmp_path / "hold_commander.zip")
+    assert model.policy.log_std.exp().detach().numpy() == pytest.approx(0.1)
+    assert "action_std_cap" not in model.__dict__  # not an SB3 argument
+    for bad in ("0.1", "0_from_0.5", "0.1_from_1"):
+        with pytest.raises(ValueError, match=r"algo_kwargs\['action_std_cap'\] must be"):
+            train("ppo", "commander", "hold", out=tmp_path / "bad", smoke=True, algo_kwargs={"action_std_cap": bad})
+    with pytest.raises(ValueError, match=r"algo_kwargs\['action_std_cap'\] is for ppo only"):
+        train(
+            "sac", "commander", "hold", out=tmp_path / "sac", smoke=True, algo_kwargs={"action_std_cap": "0.1_from_0.5"}
+        )
+
+
 def test_fixed_statistics_map_the_bounds_onto_plus_minus_one_and_do_not_move() -> None:
     from agents.normalization import FixedMeanStd
 

@@ -32,6 +32,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import os
 import re
 import shlex
@@ -39,7 +40,7 @@ import sys
 import time
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, CallbackList, CheckpointCallback
@@ -229,6 +230,55 @@ class EntropySchedule(BaseCallback):
         return True
 
 
+class ActionStdCap(BaseCallback):
+    """A falling bound on PPO's action standard deviation (``action_std_cap: <final>_from_<f>`` in a recipe's
+    ``algo_kwargs``, e.g. ``0.1_from_0.5``): over the first fraction ``f`` of training the policy's deviation is its
+    own; from there the bound falls geometrically from the policy's largest deviation at ``f`` to ``final`` at the end,
+    and before each rollout every entry of the policy's ``log_std`` above it is set to it. The saved policy's
+    deviation is capped by ``final``.
+
+    Why: every evaluation acts on the policy's mean action, which a policy trained with wide noise need not have
+    learned to use well (the sampled team can be quicker and surer than its mean: ``python -m train.noise_gap``).
+    SB3 has no such bound, and an entropy bonus falling to 0 shrinks the deviation only a little."""
+
+    def __init__(self, final: float, start: float) -> None:
+        super().__init__()
+        if not final > 0.0:
+            raise ValueError(f"action_std_cap: the final deviation must be > 0, got {final}")
+        if not 0.0 <= start < 1.0:
+            raise ValueError(f"action_std_cap: the fraction of training before the cap must be in [0, 1), got {start}")
+        self.final, self.start = float(final), float(start)
+        self.log_std0: float | None = None  # the policy's largest log deviation when the cap begins
+
+    def cap(self, progress: float) -> float | None:
+        """The bound on log_std at ``progress`` (the fraction of training done), None before the cap begins."""
+        if progress < self.start or self.log_std0 is None:
+            return None
+        frac = min((progress - self.start) / (1.0 - self.start), 1.0)
+        return min(self.log_std0, self.log_std0 + frac * (math.log(self.final) - self.log_std0))
+
+    def _apply(self, progress: float) -> None:
+        import torch
+
+        log_std = cast(torch.nn.Parameter, self.model.policy.log_std)  # a Gaussian PPO policy's
+        if progress >= self.start and self.log_std0 is None:
+            self.log_std0 = float(log_std.detach().max())
+        bound = self.cap(progress)
+        if bound is not None:
+            with torch.no_grad():
+                log_std.clamp_(max=bound)
+
+    def _on_rollout_start(self) -> None:
+        self._apply(float(self.model.num_timesteps) / float(self.model._total_timesteps))
+
+    def _on_training_end(self) -> None:
+        self._apply(1.0)
+
+    def _on_step(self) -> bool:
+        return True
+
+
+_STD_CAP = re.compile(r"(?P<final>[^_]+)_from_(?P<start>[^_]+)")
 _SCHEDULE = re.compile(r"lin_(?P<initial>[^_]+)(_from_(?P<start>[^_]+))?")
 _ADAPTIVE = re.compile(r"kl_(?P<initial>[^_]+)_(?P<target>[^_]+)(_from_(?P<start>[^_]+))?")
 
@@ -258,10 +308,25 @@ def schedules(hp: dict[str, Any]) -> dict[str, Any]:
 
 def sb3_schedules(hp: dict[str, Any]) -> tuple[dict[str, Any], list[BaseCallback]]:
     """SB3's arguments for ``hp`` (:func:`schedules` applied) and the callbacks that apply what SB3 does not: the
-    learning rate's adaptation to each update's KL divergence (:class:`KLAdaptation`) and an entropy coefficient's
-    schedule (:class:`EntropySchedule`; SB3 is given its first value)."""
+    learning rate's adaptation to each update's KL divergence (:class:`KLAdaptation`), an entropy coefficient's
+    schedule (:class:`EntropySchedule`; SB3 is given its first value) and a falling bound on the action deviation
+    (``action_std_cap``, :class:`ActionStdCap`; not given to SB3)."""
+    hp = dict(hp)
+    cap = hp.pop("action_std_cap", None)
     out = schedules(hp)
     callbacks: list[BaseCallback] = []
+    if cap is not None:
+        match = _STD_CAP.fullmatch(cap) if isinstance(cap, str) else None
+        try:
+            if match is None:
+                raise ValueError
+            callbacks.append(ActionStdCap(float(match["final"]), float(match["start"])))
+        except ValueError as exc:
+            raise ValueError(
+                f"algo_kwargs['action_std_cap'] must be '<final deviation>_from_<f>' (e.g. '0.1_from_0.5': from the "
+                f"fraction f of training the action deviation's bound falls to 0.1), got {cap!r}"
+                + (f": {exc}" if str(exc) else "")
+            ) from None
     if isinstance(out.get("learning_rate"), AdaptiveLR):
         callbacks.append(KLAdaptation(out["learning_rate"]))
     if isinstance(out.get("ent_coef"), LinearSchedule):
@@ -607,6 +672,10 @@ def train(
     if algo != "ppo" and str(hp.get("ent_coef", "")).startswith("lin_"):
         raise ValueError(
             f"algo_kwargs['ent_coef']: a schedule is for ppo only (SAC tunes its own), got {hp['ent_coef']!r}"
+        )
+    if algo != "ppo" and "action_std_cap" in hp:
+        raise ValueError(
+            f"algo_kwargs['action_std_cap'] is for ppo only (SAC tunes its own entropy), got {hp['action_std_cap']!r}"
         )
     hps, schedule_callbacks = sb3_schedules(hp)
     policy: Any = "MlpPolicy"

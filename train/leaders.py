@@ -212,6 +212,12 @@ class KLAdaptation(BaseCallback):
         return True
 
 
+def training_done(model: Any) -> float:
+    """The fraction of a ``learn`` call's timesteps an SB3 model has taken (its private ``_total_timesteps``, which
+    ``learn`` sets; the schedule callbacks' tests would catch a rename)."""
+    return float(model.num_timesteps) / float(model._total_timesteps)
+
+
 class EntropySchedule(BaseCallback):
     """An entropy coefficient that follows a :class:`LinearSchedule` (``ent_coef: lin_<value>_from_<f>`` in a recipe:
     held over the fraction ``f`` of training, then shrinking linearly to 0). SB3's PPO takes a float, so this sets
@@ -223,8 +229,7 @@ class EntropySchedule(BaseCallback):
         self.schedule = schedule
 
     def _on_rollout_end(self) -> None:
-        remaining = 1.0 - float(self.model.num_timesteps) / float(self.model._total_timesteps)
-        self.model.ent_coef = float(self.schedule(remaining))  # type: ignore[attr-defined]  # PPO's
+        self.model.ent_coef = float(self.schedule(1.0 - training_done(self.model)))  # type: ignore[attr-defined]  # PPO's
 
     def _on_step(self) -> bool:
         return True
@@ -269,7 +274,7 @@ class ActionStdCap(BaseCallback):
                 log_std.clamp_(max=bound)
 
     def _on_rollout_start(self) -> None:
-        self._apply(float(self.model.num_timesteps) / float(self.model._total_timesteps))
+        self._apply(training_done(self.model))
 
     def _on_training_end(self) -> None:
         self._apply(1.0)

@@ -12,6 +12,7 @@ from oracle import route_lengths
 from agents.policy import LearnedPolicy, load_policy
 from formation_env.core.errors import FormationError
 from formation_env.env.engine import Engine
+from formation_env.env.state import EngineState
 from train.evaluate import METRIC_KEYS, evaluate, reset_paired
 from train.leaders import train
 
@@ -278,6 +279,59 @@ def test_time_to_go_term_is_a_potential_difference_of_the_teams_time_to_rest() -
         np.testing.assert_allclose(total, np.broadcast_to(expect[:, None], total.shape), rtol=1e-9)
     with pytest.raises(FormationError, match=r"time_to_go.*double_integrator"):
         Engine("hold", dynamics="single_integrator", reward_weights={"time_to_go": 1.0})
+
+
+def _closing_oracle(eng: Engine, s: EngineState) -> np.ndarray:
+    """-T max over agents and capsules of clip(1 - gap / (0.1 + 0.5 max(0, closing speed)), 0, 1) (B,), from the
+    state after a step and the capsules at that sample and the one before, in numpy."""
+    from formation_env.env.rewards import CLOSING_HORIZON, CLOSING_MARGIN
+
+    cur, old = eng.capsules(s.params, s.k), eng.capsules(s.params, s.k - 1)
+    a, e, r = cur.a[:, None], cur.e[:, None], cur.rad[:, None]  # (B, 1, m, ...)
+    p, v = s.pos[:, :, None], s.vel[:, :, None]  # (B, n, 1, d)
+    ee = np.sum(e * e, axis=-1)
+    t = np.clip(np.sum((p - a) * e, axis=-1) / np.where(ee > 0, ee, 1.0), 0.0, 1.0)[..., None]  # a disc: t = 0
+    toward = a + t * e - p
+    dist = np.linalg.norm(toward, axis=-1)
+    surf_v = (a + t * e - old.a[:, None] - t * old.e[:, None]) / eng.dt
+    speed = np.sum((v - surf_v) * toward, axis=-1) / dist + (r - old.rad[:, None]) / eng.dt
+    gap = dist - r - eng.agent_radius
+    value = np.clip(1.0 - gap / (CLOSING_MARGIN + CLOSING_HORIZON * np.maximum(speed, 0.0)), 0.0, 1.0)
+    return -eng.dt * value.max(axis=(1, 2))
+
+
+def test_closing_term_warns_by_the_gap_against_the_approach_speed() -> None:
+    """Step by step it is the numpy oracle's value (static walls, moving discs), the same for every leader, and it
+    is paid somewhere in the run; a team sliding along a wall pays only within the margin, one running at it
+    pays from the horizon."""
+    from formation_env.env.rewards import TERMS
+
+    off = {"progress": 0, "formation": 0, "effort": 0, "distance": 0, "collision": 0, "success": 0, "approach": 0}
+    for name in ("narrow_passage", "moving_obstacles"):
+        eng = Engine(name, reward_weights={**off, "closing": 1.0})
+        s = eng.reset(np.random.default_rng(3), 64)
+        rng = np.random.default_rng(4)
+        paid = 0
+        for _ in range(60):
+            s, _, r, *_ = eng.step(s, rng.uniform(-1, 1, (64, eng.n_l, eng.p)))
+            expect = _closing_oracle(eng, s)
+            np.testing.assert_allclose(r, np.broadcast_to(expect[:, None], r.shape), rtol=1e-9, atol=1e-12)
+            paid += int(np.count_nonzero(expect))
+        assert paid >= 5, (name, paid)
+    row = TERMS["closing"].row
+    wall_a, wall_e, wall_r = np.zeros((1, 1, 2)), np.array([[[0.0, 2.0]]]), np.zeros((1, 1))
+
+    def value(x: float, vel: tuple[float, float]) -> float:
+        out = np.zeros(1)
+        pos, v = np.array([[[x, 1.0]]]), np.array([[vel]])
+        row(0, out, 1.0, 0.1, 0.1, pos, v, wall_a, wall_e, wall_r, wall_a, wall_e, wall_r)
+        return -out[0] / 0.1
+
+    assert value(-0.25, (0.0, 2.0)) == 0.0  # sliding 0.15 m from the wall
+    assert value(-0.15, (0.0, 2.0)) == pytest.approx(0.5)  # sliding 0.05 m from it
+    assert value(-0.85, (1.0, 0.0)) == 0.0  # 0.75 m away at 1 m/s: beyond 0.1 + 0.5 * 1 m
+    assert value(-0.6, (2.0, 0.0)) == pytest.approx(1.0 - 0.5 / 1.1)  # 0.5 m away at 2 m/s
+    assert value(-0.6, (-2.0, 0.0)) == 0.0  # leaving it
 
 
 def test_route_progress_telescopes_to_each_leaders_route_length_gained() -> None:

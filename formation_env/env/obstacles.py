@@ -42,6 +42,7 @@ __all__ = [
     "MovingCircle",
     "Obstacle",
     "Segment",
+    "axis_param",
     "bounce_axis",
     "bounce_row",
     "path_clearance",
@@ -245,18 +246,26 @@ def ray_directions(n_rays: int) -> Array:
 
 
 @jit
-def toward_axis(p: Array, a: Array, e: Array, j: int, out: Array) -> float:  # pragma: no cover
-    """The vector from the point p (d,) to the nearest point a_j + t e_j (t in [0, 1]) of capsule j's axis (a, e
-    (m, d)), written into out (d,); returns its length (m)."""
-    d = p.shape[0]
+def axis_param(p: Array, a: Array, e: Array, j: int) -> float:  # pragma: no cover
+    """The t in [0, 1] of the nearest point a_j + t e_j of capsule j's axis (a, e (m, d)) to the point p (d,)
+    (0 for a disc, whose axis is a point)."""
     ee = 0.0
     t = 0.0
-    for k in range(d):
+    for k in range(p.shape[0]):
         ee += e[j, k] * e[j, k]
     if ee > 0.0:
-        for k in range(d):
+        for k in range(p.shape[0]):
             t += (p[k] - a[j, k]) * e[j, k]
         t = min(max(t / ee, 0.0), 1.0)
+    return t
+
+
+@jit
+def toward_axis(p: Array, a: Array, e: Array, j: int, out: Array) -> float:  # pragma: no cover
+    """The vector from the point p (d,) to the nearest point a_j + t e_j (t in [0, 1], :func:`axis_param`) of
+    capsule j's axis (a, e (m, d)), written into out (d,); returns its length (m)."""
+    d = p.shape[0]
+    t = axis_param(p, a, e, j)
     dd = 0.0
     for k in range(d):
         out[k] = a[j, k] + t * e[j, k] - p[k]

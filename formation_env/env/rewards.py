@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from ._numba import jit
 from .kernel import FLAG_AT_GOAL, FLAG_COLLISION, FLAG_SUCCESS
+from .obstacles import axis_param, toward_axis
 
 Array = NDArray[np.float64]
 Bools = NDArray[np.bool_]
@@ -221,6 +222,47 @@ def _proximity(b: int, out: Array, w: float, dt: float, clear: Array) -> None:  
     v = dt * min(max(1.0 - clear[b] / PROXIMITY_MARGIN, 0.0), 1.0)
     for i in range(out.shape[0]):
         out[i] -= w * v
+
+
+#: Scales of the ``closing`` term: the gap (m) that costs even at no closing speed, and the horizon (s) over which
+#: a closing speed widens the costly gap.
+CLOSING_MARGIN, CLOSING_HORIZON = 0.1, 0.5
+
+
+@reward_term(
+    "closing",
+    0.0,
+    "-T max over agents (followers too) of max(0, 1 - c_g / (0.1 m + 0.5 s * s_g)), c_g the gap between the "
+    "agent's disc and the nearest obstacle surface, s_g >= 0 the speed at which they close (the agent's velocity "
+    "toward that surface less the surface's own): a warning that scales with the approach speed, so a team "
+    "sliding along a wall pays only within 0.1 m and one running at it pays from 0.5 s away; 1 per second at "
+    "contact",
+)
+def _closing(  # pragma: no cover
+    b: int, out: Array, w: float, dt: float, radius: float, pos: Array, vel: Array, cur_a: Array, cur_e: Array,
+    cur_r: Array, old_a: Array, old_e: Array, old_r: Array,
+) -> None:  # fmt: skip
+    a, e, rad = cur_a[b], cur_e[b], cur_r[b]
+    n, d = pos.shape[1], pos.shape[2]
+    vec = np.empty(d)
+    worst = 0.0
+    for g in range(n):
+        for j in range(rad.shape[0]):
+            dist = toward_axis(pos[b, g], a, e, j, vec)
+            gap = dist - rad[j] - radius
+            # the velocity of the axis's nearest point (the capsule's motion over the last period) and the radius's
+            # growth, both toward the agent, are taken off the agent's own
+            t = axis_param(pos[b, g], a, e, j)
+            speed = 0.0
+            if dist > 0.0:
+                for k in range(d):
+                    surf_v = (a[j, k] + t * e[j, k] - old_a[b, j, k] - t * old_e[b, j, k]) / dt
+                    speed += (vel[b, g, k] - surf_v) * vec[k] / dist
+            speed += (rad[j] - old_r[b, j]) / dt
+            reach = CLOSING_MARGIN + CLOSING_HORIZON * max(speed, 0.0)
+            worst = max(worst, min(max(1.0 - gap / reach, 0.0), 1.0))
+    for i in range(out.shape[0]):
+        out[i] -= w * dt * worst
 
 
 @reward_term("success", 10.0, "+1 on success")

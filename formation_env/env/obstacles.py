@@ -50,6 +50,7 @@ __all__ = [
     "ray_directions",
     "ray_range",
     "toward_axis",
+    "toward_axis_at",
 ]
 
 Array = NDArray[np.float64]
@@ -261,16 +262,21 @@ def axis_param(p: Array, a: Array, e: Array, j: int) -> float:  # pragma: no cov
 
 
 @jit
-def toward_axis(p: Array, a: Array, e: Array, j: int, out: Array) -> float:  # pragma: no cover
-    """The vector from the point p (d,) to the nearest point a_j + t e_j (t in [0, 1], :func:`axis_param`) of
-    capsule j's axis (a, e (m, d)), written into out (d,); returns its length (m)."""
-    d = p.shape[0]
-    t = axis_param(p, a, e, j)
+def toward_axis_at(p: Array, a: Array, e: Array, j: int, t: float, out: Array) -> float:  # pragma: no cover
+    """The vector from the point p (d,) to the point a_j + t e_j of capsule j's axis (a, e (m, d)), written into
+    out (d,); returns its length (m)."""
     dd = 0.0
-    for k in range(d):
+    for k in range(p.shape[0]):
         out[k] = a[j, k] + t * e[j, k] - p[k]
         dd += out[k] ** 2
     return math.sqrt(dd)
+
+
+@jit
+def toward_axis(p: Array, a: Array, e: Array, j: int, out: Array) -> float:  # pragma: no cover
+    """The vector from the point p (d,) to the nearest point of capsule j's axis (a, e (m, d); its parameter
+    :func:`axis_param`), written into out (d,); returns its length (m)."""
+    return toward_axis_at(p, a, e, j, axis_param(p, a, e, j), out)
 
 
 @jit

@@ -20,7 +20,7 @@ from numpy.typing import NDArray
 
 from ._numba import jit
 from .kernel import FLAG_AT_GOAL, FLAG_COLLISION, FLAG_SUCCESS
-from .obstacles import axis_param, toward_axis
+from .obstacles import axis_param, toward_axis_at
 
 Array = NDArray[np.float64]
 Bools = NDArray[np.bool_]
@@ -248,11 +248,11 @@ def _closing(  # pragma: no cover
     worst = 0.0
     for g in range(n):
         for j in range(rad.shape[0]):
-            dist = toward_axis(pos[b, g], a, e, j, vec)
+            t = axis_param(pos[b, g], a, e, j)
+            dist = toward_axis_at(pos[b, g], a, e, j, t, vec)
             gap = dist - rad[j] - radius
             # the velocity of the axis's nearest point (the capsule's motion over the last period) and the radius's
             # growth, both toward the agent, are taken off the agent's own
-            t = axis_param(pos[b, g], a, e, j)
             speed = 0.0
             if dist > 0.0:
                 for k in range(d):
